@@ -1,0 +1,27 @@
+//! Prognos estimator core: `no_std`, allocation-free model-based prognostics.
+//!
+//! Every buffer is a fixed-size array sized by const generics; every function that can see bad
+//! data returns [`Error`] instead of panicking. Scalars are generic over [`Real`] (f32 on the
+//! Cortex-M4F, f64 on the host).
+#![no_std]
+#![forbid(unsafe_code)]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing
+    )
+)]
+
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod error;
+pub mod model;
+pub mod random;
+pub mod real;
+
+pub use error::Error;
+pub use real::{Real, cast};

@@ -1,0 +1,57 @@
+//! The scalar abstraction: f32 on the microcontroller, f64 on the host.
+
+use nalgebra::RealField;
+
+/// A floating-point scalar the core computes in (implemented for `f32` and `f64`).
+pub trait Real: RealField + Copy + Default + PartialOrd {
+    /// Largest finite value, used as a sentinel for "never" (e.g. an EOL beyond the horizon).
+    const MAX_FINITE: Self;
+    /// Smallest positive normal value, the floor for divisions and variances.
+    const MIN_POSITIVE: Self;
+    /// Machine epsilon.
+    const EPSILON: Self;
+    /// Converts to f64 (reporting, metrics on the host).
+    fn as_f64(self) -> f64;
+    /// True when neither NaN nor infinite.
+    fn finite(self) -> bool;
+}
+
+impl Real for f64 {
+    const MAX_FINITE: Self = f64::MAX;
+    const MIN_POSITIVE: Self = f64::MIN_POSITIVE;
+    const EPSILON: Self = f64::EPSILON;
+    #[inline]
+    fn as_f64(self) -> f64 {
+        self
+    }
+    #[inline]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+impl Real for f32 {
+    const MAX_FINITE: Self = f32::MAX;
+    const MIN_POSITIVE: Self = f32::MIN_POSITIVE;
+    const EPSILON: Self = f32::EPSILON;
+    #[inline]
+    fn as_f64(self) -> f64 {
+        f64::from(self)
+    }
+    #[inline]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+/// Converts an f64 constant or parameter into the scalar type of generic code.
+#[inline]
+pub fn cast<T: Real>(v: f64) -> T {
+    nalgebra::convert(v)
+}
+
+/// True when every entry of the slice is finite.
+#[inline]
+pub fn all_finite<T: Real>(values: &[T]) -> bool {
+    values.iter().all(|v| v.finite())
+}
