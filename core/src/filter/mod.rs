@@ -1,0 +1,4 @@
+//! Recursive Bayesian filters.
+
+pub mod particle;
+pub mod resample;
