@@ -22,7 +22,9 @@ extern crate std;
 
 pub mod error;
 pub mod filter;
+pub mod metrics;
 pub mod model;
+pub mod prognose;
 pub mod random;
 pub mod real;
 

@@ -2,3 +2,4 @@
 
 pub mod particle;
 pub mod resample;
+pub mod ukf;
