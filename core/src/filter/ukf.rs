@@ -1,6 +1,8 @@
 //! Unscented Kalman filter with a const-generic sigma-point count, in the form of van der
-//! Merwe's scaled unscented transform (the form filterpy's `UnscentedKalmanFilter` uses:
-//! the update reuses the sigma points propagated by the prediction).
+//! Merwe's scaled unscented transform (the form filterpy's `UnscentedKalmanFilter` uses: the
+//! prediction ends by drawing fresh sigma points from the prior mean and covariance, Q
+//! included, and the update transforms those through the measurement function; reusing the
+//! propagated points would leave Q out of the innovation and cross covariances).
 //!
 //! Joint state-parameter estimation augments the state with the parameters: the model leaves
 //! them constant and `Q` gives them a random-walk variance.
@@ -57,7 +59,7 @@ pub struct Ukf<T: Real, const NX: usize, const NS: usize> {
     wm: [T; NS],
     wc: [T; NS],
     lambda: T,
-    /// The sigma points hold the propagated prior for the next update.
+    /// The sigma points were drawn from the current prior (x, P) by the last prediction.
     propagated: bool,
     /// NIS gate: measurements with a larger NIS are rejected (`MAX_FINITE` disables it).
     gate: T,
@@ -224,9 +226,10 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
         if symmetrise(&mut p) {
             flags.insert(Flags::COVARIANCE_SYMMETRISED);
         }
+        let prior_sigmas = self.sigma_points(&x, &p)?;
         self.x = x;
         self.p = p;
-        self.sigmas = pts;
+        self.sigmas = prior_sigmas;
         self.propagated = true;
         Ok(flags)
     }
