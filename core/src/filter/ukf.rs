@@ -226,6 +226,10 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
         if symmetrise(&mut p) {
             flags.insert(Flags::COVARIANCE_SYMMETRISED);
         }
+        // Finite sigma points can still overflow in the outer products.
+        if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
+            return Err(Error::NonFiniteState);
+        }
         let prior_sigmas = self.sigma_points(&x, &p)?;
         self.x = x;
         self.p = p;
@@ -235,7 +239,8 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
     }
 
     /// Measurement update with measurement `y` (length `NY`) and its noise covariance `r`.
-    /// Errors leave the filter unchanged. A measurement whose NIS exceeds the gate is not
+    /// Errors leave the filter unchanged, including a posterior covariance that is not
+    /// positive definite ([`Error::NotPositiveDefinite`]). A measurement whose NIS exceeds the gate is not
     /// fused (`fused = false`, [`Flags::MEASUREMENT_REJECTED`]).
     pub fn update<M, const NU: usize, const NY: usize>(
         &mut self,
@@ -309,6 +314,11 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
         }
         if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
             return Err(Error::NonFiniteState);
+        }
+        // `P - K S K^T` can lose definiteness to cancellation (e.g. after a wild measurement
+        // threw the state far out); keep the last valid estimate rather than store it.
+        if Cholesky::new(p).is_none() {
+            return Err(Error::NotPositiveDefinite);
         }
         self.x = x;
         self.p = p;
