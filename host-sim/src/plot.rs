@@ -197,10 +197,24 @@ pub fn plot_rul(path: &Path, series: &TimeSeries, alpha: f64) -> Result<bool, Si
     if !any(&truth) && !any(&median) {
         return Ok(false);
     }
-    let cone_lo: Vec<f64> = truth.iter().map(|r| (1.0 - alpha) * r).collect();
-    let cone_hi: Vec<f64> = truth.iter().map(|r| (1.0 + alpha) * r).collect();
+    // Scale to the truth and the median, not to intervals censored at a long horizon;
+    // clamp everything drawn to the visible range.
+    let finite_max = |v: &[f64], k: f64| {
+        v.iter()
+            .filter(|x| x.is_finite())
+            .fold(0.0_f64, |a, &x| a.max(k * x))
+    };
+    let y_max = if any(&truth) {
+        finite_max(&truth, 1.3 * (1.0 + alpha))
+    } else {
+        finite_max(&median, 1.5)
+    }
+    .max(1e-9);
+    let clamp = |v: &[f64]| -> Vec<f64> { v.iter().map(|x| x.clamp(0.0, y_max)).collect() };
+    let cone_lo = clamp(&truth.iter().map(|r| (1.0 - alpha) * r).collect::<Vec<_>>());
+    let cone_hi = clamp(&truth.iter().map(|r| (1.0 + alpha) * r).collect::<Vec<_>>());
+    let (median, lower, upper) = (clamp(&median), clamp(&lower), clamp(&upper));
     render(path, (900, 520), |root| {
-        let y_max = range_of(truth.iter().chain(&median).chain(&cone_hi).chain(&upper)).end;
         let mut chart = ChartBuilder::on(root)
             .caption(format!("RUL (alpha = {alpha})"), (FONT, 20))
             .margin(10)
@@ -219,12 +233,12 @@ pub fn plot_rul(path: &Path, series: &TimeSeries, alpha: f64) -> Result<bool, Si
             chart
                 .draw_series(std::iter::once(Polygon::new(
                     band(&t, &cone_lo, &cone_hi),
-                    CONE.mix(0.15).filled(),
+                    CONE.mix(0.3).filled(),
                 )))
                 .map_err(err)?
                 .label(format!("true RUL +-{:.0}%", alpha * 100.0))
                 .legend(|(x, y)| {
-                    Rectangle::new([(x, y - 4), (x + 18, y + 4)], CONE.mix(0.15).filled())
+                    Rectangle::new([(x, y - 4), (x + 18, y + 4)], CONE.mix(0.3).filled())
                 });
         }
         if any(&median) {
