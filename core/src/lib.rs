@@ -20,6 +20,7 @@ extern crate std;
 
 pub mod error;
 pub mod model;
+pub mod plants;
 pub mod random;
 pub mod real;
 
