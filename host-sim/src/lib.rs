@@ -1,1 +1,3 @@
+//! Prognos host simulator: truth plants, lockstep runs and Monte-Carlo campaigns.
 
+pub mod plants;
