@@ -13,7 +13,9 @@
 //!   of `beta_i = 1/N - w_i` with an input-dependent growth rate `c_1(u)` and an offset
 //!   `c_2`:  `w_i <- 1 / (1 + exp(c_1 (N beta_i + c_2 sign(beta_i))))`, which is at most 1,
 //!   above 1/2 for particles better than average and below 1/2 for worse ones, with a
-//!   contrast of at least `exp(c_1 c_2)` between the two groups. The printed Eq. 28 has the
+//!   contrast of at least `exp(c_1 c_2)` between the two groups. It acts only when the
+//!   update left the weights nearly uniform (`improvement_ess`): applied to an already
+//!   informative likelihood it would flatten the weights instead. The printed Eq. 28 has the
 //!   sign of the exponent reversed (it gives negative weights); see `docs/deviations.md`.
 //!
 //! The likelihood is taken as the model's `exp(log_likelihood)`, which for Gaussian sensors
@@ -55,6 +57,10 @@ pub struct AdaptiveConfig<T: Real, const NX: usize> {
     pub spread_std: SVector<T, NX>,
     /// Offset `c_2` of the weight mutation (in units of the mean weight 1/N).
     pub improvement_offset: T,
+    /// The mutation acts only when the update left the weights nearly uniform:
+    /// ESS >= `improvement_ess * N` (section 3.1.2's case of a state that hardly changes the
+    /// measurement). 0 mutates at every step.
+    pub improvement_ess: T,
 }
 
 impl<T: Real, const NX: usize> AdaptiveConfig<T, NX> {
@@ -74,6 +80,9 @@ impl<T: Real, const NX: usize> AdaptiveConfig<T, NX> {
         }
         if !(self.improvement_offset.finite() && self.improvement_offset >= T::zero()) {
             return Err(Error::InvalidParameter("improvement_offset"));
+        }
+        if !(self.improvement_ess >= T::zero() && self.improvement_ess <= T::one()) {
+            return Err(Error::InvalidParameter("improvement_ess"));
         }
         Ok(())
     }
@@ -173,10 +182,13 @@ impl<T: Real, const NX: usize, const N: usize> AdaptiveFilter<T, NX, N> {
             self.likelihood_sum += max_likelihood;
             self.likelihood_count = self.likelihood_count.saturating_add(1);
         }
-        if self.config.method == Method::Apf && improvement_gain > T::zero() {
+        let n: T = cast(N as f64);
+        if self.config.method == Method::Apf
+            && improvement_gain > T::zero()
+            && self.filter.ess() >= self.config.improvement_ess * n
+        {
             out.improved = self.improve(improvement_gain);
         }
-        let n: T = cast(N as f64);
         let ess_low = self.filter.ess() < self.config.ess_threshold * n;
         // The mean is judged at every ESS-triggered resampling, and also when a long window
         // without resampling has gone by.
@@ -280,6 +292,7 @@ mod tests {
                 min_window: 5,
                 spread_std: SVector::from([3.0]),
                 improvement_offset: 0.6,
+                improvement_ess: 0.0,
             },
         )
         .unwrap()
