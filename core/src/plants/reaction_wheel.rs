@@ -545,3 +545,171 @@ mod tests {
         assert!((c.consumption(37.0, 7.494e-6) - 240.0 * rate).abs() < 1e-18);
     }
 }
+
+/// Scale of the loss-rate state: the filters carry `beta` in units of 1e-6 mL/s so that it is
+/// of order one in f32.
+pub const BETA_UNIT: f64 = 1e-6;
+
+/// Checks a consumption sample (mL): finite and positive.
+fn consumption_log<T: Real>(y: &[T]) -> Option<T> {
+    let v = *y.first()?;
+    if v.finite() && v > T::zero() {
+        Some(v.ln())
+    } else {
+        None
+    }
+}
+
+fn exposure_from<T: Real>(mean_inv: T, var_inv: T, duration: T) -> IntervalExposure<T> {
+    IntervalExposure {
+        duration,
+        mean_inverse_temperature: mean_inv,
+        var_inverse_temperature: var_inv,
+    }
+}
+
+impl<T: Real> IntervalExposure<T> {
+    /// The exposure as a filter input `[mean(1/T), var(1/T), duration]`.
+    pub fn as_input(&self) -> nalgebra::Vector3<T> {
+        nalgebra::Vector3::new(
+            self.mean_inverse_temperature,
+            self.var_inverse_temperature,
+            self.duration,
+        )
+    }
+
+    /// Checks that the exposure is usable (finite, positive duration and 1/T, var >= 0).
+    pub fn check(&self) -> Result<(), Error> {
+        if !(self.duration.finite() && self.duration > T::zero()) {
+            return Err(Error::InvalidTimeStep);
+        }
+        if !(self.mean_inverse_temperature.finite() && self.mean_inverse_temperature > T::zero()) {
+            return Err(Error::OutOfRange("lubricant temperature"));
+        }
+        if !(self.var_inverse_temperature.finite() && self.var_inverse_temperature >= T::zero()) {
+            return Err(Error::OutOfRange("lubricant temperature variance"));
+        }
+        Ok(())
+    }
+}
+
+/// One-step PF model of Eq. 30: state `[b (degC), beta (1e-6 mL/s)]` (constant; the filter's
+/// random walk moves it), input the interval exposure `[mean(1/T), var(1/T), duration]`,
+/// measurement the consumption of the interval (mL) with log-normal noise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossJointModel<T> {
+    /// Relative (log-normal) standard deviation of a consumption measurement.
+    pub relative_noise: T,
+}
+
+impl<T: Real> Model<T, 2, 3> for LossJointModel<T> {
+    fn step(&self, x: &Vector2<T>, _u: &Vector3<T>, _dt: T) -> Vector2<T> {
+        *x
+    }
+}
+
+impl<T: Real> Stochastic<T, 2, 3> for LossJointModel<T> {
+    fn measurement_len(&self) -> usize {
+        1
+    }
+    fn log_likelihood(&self, x: &Vector2<T>, u: &Vector3<T>, y: &[T]) -> T {
+        let Some(log_y) = consumption_log(y) else {
+            return T::min_value().unwrap_or(-T::MAX_FINITE);
+        };
+        let e = exposure_from(u.x, u.y, u.z);
+        let beta = x.y * cast(BETA_UNIT);
+        if !(beta > T::zero()) {
+            return T::min_value().unwrap_or(-T::MAX_FINITE);
+        }
+        let predicted = e.consumption(x.x, beta).ln();
+        gaussian_log_likelihood(&[log_y], &[predicted], &[self.relative_noise])
+    }
+}
+
+/// First PF of the two-step scheme (Eqs. 31-33): state `[b]`, input the exposures of the
+/// current and the previous interval `[mean_k, var_k, dur_k, mean_k-1, var_k-1, dur_k-1]`,
+/// measurement the consumption ratio `y_k / y_k-1`, which does not depend on `beta`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossRatioModel<T> {
+    /// Relative noise of one consumption measurement (the ratio has sqrt(2) times it).
+    pub relative_noise: T,
+}
+
+impl<T: Real> Model<T, 1, 6> for LossRatioModel<T> {
+    fn step(&self, x: &SVector<T, 1>, _u: &SVector<T, 6>, _dt: T) -> SVector<T, 1> {
+        *x
+    }
+}
+
+impl<T: Real> Stochastic<T, 1, 6> for LossRatioModel<T> {
+    fn measurement_len(&self) -> usize {
+        1
+    }
+    fn log_likelihood(&self, x: &SVector<T, 1>, u: &SVector<T, 6>, y: &[T]) -> T {
+        let Some(log_ratio) = consumption_log(y) else {
+            return T::min_value().unwrap_or(-T::MAX_FINITE);
+        };
+        let b = x.x;
+        let &[m0, v0, d0, m1, v1, d1] = u.as_slice() else {
+            return T::min_value().unwrap_or(-T::MAX_FINITE);
+        };
+        let now = exposure_from(m0, v0, d0);
+        let before = exposure_from(m1, v1, d1);
+        let predicted = now.integral(b).ln() - before.integral(b).ln();
+        let sigma = self.relative_noise * cast::<T>(2.0).sqrt();
+        gaussian_log_likelihood(&[log_ratio], &[predicted], &[sigma])
+    }
+}
+
+/// Second PF of the two-step scheme (Eq. 34): state `[beta (1e-6 mL/s)]`, input
+/// `[mean(1/T), var(1/T), duration, b_hat]`, measurement the interval consumption (mL).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossRateModel<T> {
+    /// Relative (log-normal) standard deviation of a consumption measurement.
+    pub relative_noise: T,
+}
+
+impl<T: Real> Model<T, 1, 4> for LossRateModel<T> {
+    fn step(&self, x: &SVector<T, 1>, _u: &SVector<T, 4>, _dt: T) -> SVector<T, 1> {
+        *x
+    }
+}
+
+impl<T: Real> Stochastic<T, 1, 4> for LossRateModel<T> {
+    fn measurement_len(&self) -> usize {
+        1
+    }
+    fn log_likelihood(&self, x: &SVector<T, 1>, u: &SVector<T, 4>, y: &[T]) -> T {
+        let Some(log_y) = consumption_log(y) else {
+            return T::min_value().unwrap_or(-T::MAX_FINITE);
+        };
+        let beta = x.x * cast(BETA_UNIT);
+        if !(beta > T::zero()) {
+            return T::min_value().unwrap_or(-T::MAX_FINITE);
+        }
+        let e = exposure_from(u.x, u.y, u.z);
+        let predicted = e.consumption(u.w, beta).ln();
+        gaussian_log_likelihood(&[log_y], &[predicted], &[self.relative_noise])
+    }
+}
+
+/// Cumulative lubricant consumption for RUL prediction: state `[X (mL), b, beta (1e-6 mL/s)]`,
+/// input `[T_lub (degC)]` held over the step, `X += beta exp(-b/T) dt`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LossAccumulationModel;
+
+impl<T: Real> Model<T, 3, 1> for LossAccumulationModel {
+    fn step(&self, x: &Vector3<T>, u: &SVector<T, 1>, dt: T) -> Vector3<T> {
+        let rate = lubricant_loss_rate(x.y, x.z * cast(BETA_UNIT), u.x);
+        Vector3::new(x.x + rate * dt, x.y, x.z)
+    }
+}
+
+impl<T: Real> Stochastic<T, 3, 1> for LossAccumulationModel {
+    fn measurement_len(&self) -> usize {
+        0
+    }
+    fn log_likelihood(&self, _x: &Vector3<T>, _u: &SVector<T, 1>, _y: &[T]) -> T {
+        T::zero()
+    }
+}
