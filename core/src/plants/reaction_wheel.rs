@@ -178,7 +178,16 @@ impl<T: Real> WheelParams<T> {
     /// RK4 at 0.05 s does not chatter at standstill.
     #[inline]
     pub fn coulomb_torque(&self, speed: T) -> T {
-        self.coulomb_friction * (speed / self.coulomb_smoothing).tanh()
+        let x = speed / self.coulomb_smoothing;
+        // tanh(20) = 1 - 8e-18: skip the transcendental away from standstill.
+        let limit: T = cast(20.0);
+        if x > limit {
+            self.coulomb_friction
+        } else if x < -limit {
+            -self.coulomb_friction
+        } else {
+            self.coulomb_friction * x.tanh()
+        }
     }
 
     /// Right-hand side of Eq. 4 without ripple and cogging: `(dI/dt, domega/dt)`.
