@@ -1192,6 +1192,49 @@ pub fn table7(runs: usize, base_seed: u64) -> String {
     out
 }
 
+/// Runs `pipeline::ReactionWheel` (scalar `T`) through the Table 3 scenario for `duration`
+/// seconds; returns the temperature estimates (degC) and the truth.
+pub fn run_pipeline<T: Real>(
+    sensors: WheelSensors,
+    duration: f64,
+    seed: u64,
+) -> Result<(Vec<f64>, Vec<f64>), prognos_core::Error> {
+    use prognos_core::pipeline::reaction_wheel::{ReactionWheel, ReactionWheelConfig};
+    let dt = SAMPLE_INTERVAL_S;
+    let mut truth_rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0xFEED);
+    let config = ReactionWheelConfig::<T>::new(cast(sensors.current_std), cast(sensors.speed_std))?;
+    let mut pipeline = ReactionWheel::<T, 100, 50>::new(config, &mut rng)?;
+    let mut profile = Table3Profile::new();
+    let mut wheel = TruthWheel::new();
+    let (_, temp0, cmd0) = profile.current();
+    wheel.settle(cmd0, temp0);
+    let y0 = sensors.measure(&wheel, &mut truth_rng);
+    pipeline.step(
+        T::zero(),
+        cast(cmd0),
+        Some(&[cast(y0[0]), cast(y0[1])]),
+        &mut rng,
+    )?;
+    let (mut est, mut truth) = (Vec::new(), Vec::new());
+    for _ in 0..(duration / dt).round() as usize {
+        let (_, temperature, command) = profile.current();
+        wheel.step(command, temperature, dt);
+        profile.advance(dt);
+        let (t, true_temp, next_command) = profile.current();
+        let y = sensors.measure(&wheel, &mut truth_rng);
+        let r = pipeline.step(
+            cast(t),
+            cast(next_command),
+            Some(&[cast(y[0]), cast(y[1])]),
+            &mut rng,
+        )?;
+        est.push(r.temperature.as_f64());
+        truth.push(true_temp);
+    }
+    Ok((est, truth))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1240,5 +1283,33 @@ mod tests {
             .fold(0.0, f64::max);
         assert!(worst < 0.01, "worst relative f32/f64 gap {worst}");
         assert!(b.estimate.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn pipeline_tracks_temperature_in_f32_and_f64() {
+        let (e64, truth) = run_pipeline::<f64>(WheelSensors::HIGH_NOISE, 150.0, 9).unwrap();
+        let (e32, _) = run_pipeline::<f32>(WheelSensors::HIGH_NOISE, 150.0, 9).unwrap();
+        let late = 2000..truth.len();
+        let rel = |a: &[f64]| {
+            late.clone()
+                .map(|k| ((a[k] - truth[k]) / truth[k]).abs())
+                .fold(0.0, f64::max)
+        };
+        assert!(rel(&e64) < 0.02, "f64 worst late error {}", rel(&e64));
+        assert!(rel(&e32) < 0.02, "f32 worst late error {}", rel(&e32));
+        // The two runs draw different particles (rounding changes the random walks), so the
+        // gap is judged as an RMS over the window; the worst sample is bounded more loosely.
+        let n = late.len() as f64;
+        let rms_gap = (late
+            .clone()
+            .map(|k| ((e32[k] - e64[k]) / truth[k]).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        let worst_gap = late
+            .map(|k| (e32[k] - e64[k]).abs() / truth[k])
+            .fold(0.0, f64::max);
+        assert!(rms_gap < 0.01, "f32/f64 RMS gap {rms_gap}");
+        assert!(worst_gap < 0.02, "f32/f64 worst gap {worst_gap}");
     }
 }
