@@ -14,7 +14,9 @@ pub mod error;
 pub mod linear_degradation;
 pub mod lockstep;
 pub mod output;
+pub mod plants;
 pub mod plot;
+pub mod reaction_wheel;
 pub mod registry;
 pub mod scenario;
 
