@@ -19,7 +19,10 @@
 extern crate std;
 
 pub mod error;
+pub mod health;
+pub mod learn;
 pub mod model;
+pub mod pipeline;
 pub mod random;
 pub mod real;
 

@@ -11,7 +11,11 @@ pub fn uniform01<T: Real, R: Rng + ?Sized>(rng: &mut R) -> T {
     let u = bits as f64 * (1.0 / (1u64 << 53) as f64);
     let v: T = cast(u);
     // f32 rounding can give exactly 1.0; keep the half-open interval.
-    if v >= T::one() { T::one() - T::EPSILON } else { v }
+    if v >= T::one() {
+        T::one() - T::EPSILON
+    } else {
+        v
+    }
 }
 
 /// Uniform variate on the open interval (0, 1), safe for logarithms.

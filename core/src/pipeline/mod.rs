@@ -1,0 +1,3 @@
+//! Complete on-board prognosers that compose the core pieces for one system.
+
+pub mod edge;
