@@ -1,1 +1,1 @@
-
+pub mod edge_cloud;
