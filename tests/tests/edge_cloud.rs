@@ -47,8 +47,20 @@ fn bearing3_1_end_to_end_meets_the_paper_horizon_and_writes_outputs_atomically()
             .filter_map(|r| r.hi_smoothed)
             .all(f64::is_finite)
     );
+    // Healthy before the trigger, far above it at the end.
     let last_hi = run.series.iter().rev().find_map(|r| r.hi_smoothed).unwrap();
-    assert!(last_hi > config.eol_threshold, "{last_hi}");
+    assert!(last_hi > 10.0 * config.prog_threshold, "{last_hi}");
+    // Every prediction from t_EoL - PH on lies in the alpha band (Eq. 35).
+    let band = config.alpha * s.end_of_life_s;
+    for r in run.series.iter().filter(|r| r.t_s >= s.end_of_life_s - ph) {
+        let p = r.rul.expect("a prediction").mean_s;
+        assert!(
+            (p - r.true_rul_s).abs() <= band,
+            "{} s: {p} vs {}",
+            r.t_s,
+            r.true_rul_s
+        );
+    }
     // Nine REALs every 10 s against 2560 samples/s of four bytes.
     assert_eq!(s.data_rate.raw_bytes_per_s, 10240.0);
     assert!((s.data_rate.model_bytes_per_s - 3.6).abs() < 1e-12);

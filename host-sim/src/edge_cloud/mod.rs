@@ -13,7 +13,7 @@ mod output;
 use bearing::{BearingRecord, SNAPSHOT_LEN, load_bearing};
 use cloud::{CloudPrognoser, ORDER, RulPrediction};
 use prognos_core::health::DegradationStage;
-use prognos_core::learn::ar::{OrivConfig, WindowCheck};
+use prognos_core::learn::ar::{ArModel, OrivConfig, WindowCheck};
 use prognos_core::metrics::{HorizonBand, prognostic_horizon};
 use prognos_core::pipeline::edge::{EdgeConfig, EdgeMonitor};
 use serde::{Deserialize, Serialize};
@@ -135,14 +135,14 @@ impl Default for EdgeCloudConfig {
             spectrum_points: 256,
             use_noise_variance: true,
             smoothing_window: 12,
-            prog_threshold: 0.1,
-            diff_threshold: 0.2,
-            eol_threshold: 10.0,
+            prog_threshold: 0.5,
+            diff_threshold: 0.1,
+            eol_threshold: 50.0,
             b_walk_var: 1e-5,
             c_walk_var: 1e-5,
             b_prior: [1e-3, 1.0],
             c_prior: [1e-3, 10.0],
-            relative_noise: 0.1,
+            relative_noise: 0.2,
             absolute_noise: 0.01,
             max_rul_s: 1e6,
             snapshot_period_s: 10.0,
@@ -327,56 +327,94 @@ pub struct BearingRun {
     pub series: Vec<SeriesRow>,
 }
 
-/// Runs edge and cloud over a loaded record.
-pub fn analyse_bearing(
+/// What the edge did with one snapshot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeRow {
+    pub t_s: f64,
+    /// The snapshot was rejected (flat, saturated, ORIV failure); the last model is held.
+    pub edge_rejected: bool,
+    pub hi_nrmse: Option<f64>,
+    pub nrmse_alarm: bool,
+    /// The model sent to the cloud at this time (the held one after a rejection).
+    pub sent: Option<ArModel<f64, ORDER>>,
+}
+
+/// The edge half over a whole record: one row per snapshot.
+pub fn run_edge(
     record: &BearingRecord,
     config: &EdgeCloudConfig,
-) -> Result<BearingRun, EdgeCloudError> {
+) -> Result<Vec<EdgeRow>, EdgeCloudError> {
     config.validate()?;
     let mut edge = EdgeMonitor::<f64, ORDER, ORDER, BUFFER_SNAPSHOTS, SNAPSHOT_LEN>::new(
         config.edge_config(),
     )?;
-    let mut cloud = CloudPrognoser::new(config)?;
-    let eol = record.end_of_life_s();
-    let mut series = Vec::with_capacity(record.snapshots.len());
-    let mut rejections = 0usize;
+    let mut transmitting = false;
+    let mut rows = Vec::with_capacity(record.snapshots.len());
     for snap in &record.snapshots {
         let signal = match config.channel {
             Channel::Horizontal => &snap.horizontal,
             Channel::Vertical => &snap.vertical,
         };
-        let mut row = SeriesRow {
+        let mut row = EdgeRow {
             t_s: snap.t_s,
             edge_rejected: false,
             hi_nrmse: None,
             nrmse_alarm: false,
+            sent: None,
+        };
+        match edge.push_snapshot(signal) {
+            Ok(Some(r)) => {
+                row.hi_nrmse = r.hi_nrmse;
+                row.nrmse_alarm = r.alarm;
+                transmitting |= r.transmit;
+                row.sent = r.transmit.then_some(r.model);
+            }
+            Ok(None) => {}
+            Err(_) => {
+                // The edge holds its last good model and sends it again.
+                row.edge_rejected = true;
+                row.sent = edge.model().copied().filter(|_| transmitting);
+            }
+        }
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// Runs edge and cloud over a loaded record.
+pub fn analyse_bearing(
+    record: &BearingRecord,
+    config: &EdgeCloudConfig,
+) -> Result<BearingRun, EdgeCloudError> {
+    let edge_rows = run_edge(record, config)?;
+    run_cloud(record, &edge_rows, config)
+}
+
+/// The cloud half and the scoring over the edge's rows (cloud settings only are used, so
+/// one edge pass serves many cloud configurations when tuning).
+pub fn run_cloud(
+    record: &BearingRecord,
+    edge_rows: &[EdgeRow],
+    config: &EdgeCloudConfig,
+) -> Result<BearingRun, EdgeCloudError> {
+    config.validate()?;
+    let mut cloud = CloudPrognoser::new(config)?;
+    let eol = record.end_of_life_s();
+    let mut series = Vec::with_capacity(edge_rows.len());
+    for e in edge_rows {
+        let mut row = SeriesRow {
+            t_s: e.t_s,
+            edge_rejected: e.edge_rejected,
+            hi_nrmse: e.hi_nrmse,
+            nrmse_alarm: e.nrmse_alarm,
             hi_raw: None,
             hi_smoothed: None,
             stage: None,
             rul: None,
-            true_rul_s: eol - snap.t_s,
+            true_rul_s: eol - e.t_s,
         };
-        // A rejected window holds the last good model: the edge sends it again.
-        let report = match edge.push_snapshot(signal) {
-            Ok(Some(report)) => Some(report),
-            Ok(None) => None,
-            Err(_) => {
-                rejections += 1;
-                row.edge_rejected = true;
-                None
-            }
-        };
-        let sent = match report {
-            Some(r) => {
-                row.hi_nrmse = r.hi_nrmse;
-                row.nrmse_alarm = r.alarm;
-                r.transmit.then_some(r.model)
-            }
-            None if row.edge_rejected => edge.model().copied(),
-            None => None,
-        };
-        if let Some(model) = sent {
-            let step = cloud.on_model(snap.t_s, &model)?;
+        if let Some(model) = e.sent {
+            let step = cloud.on_model(e.t_s, &model)?;
             row.hi_raw = step.hi_raw;
             row.hi_smoothed = step.hi_smoothed;
             row.stage = step.stage;
@@ -384,6 +422,7 @@ pub fn analyse_bearing(
         }
         series.push(row);
     }
+    let rejections = series.iter().filter(|r| r.edge_rejected).count();
     let predicted: Vec<&SeriesRow> = series.iter().filter(|r| r.rul.is_some()).collect();
     let times: Vec<f64> = predicted.iter().map(|r| r.t_s).collect();
     let truth: Vec<f64> = predicted.iter().map(|r| r.true_rul_s).collect();
