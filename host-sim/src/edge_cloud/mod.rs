@@ -131,7 +131,7 @@ impl Default for EdgeCloudConfig {
             instrument_delay: 0,
             warmup_models: 150,
             reference_models: 10,
-            nrmse_alarm: 1.0,
+            nrmse_alarm: 1.1,
             spectrum_points: 256,
             use_noise_variance: true,
             smoothing_window: 12,
