@@ -319,3 +319,19 @@ fn edge_in_f32_matches_f64_on_real_vibration() {
     // Measured about 4e-12; far below the trigger threshold 0.5 of the HI.
     assert!(worst < 1e-6, "f32 vs f64 spectral distance {worst}");
 }
+
+#[test]
+fn cli_entry_returns_2_on_a_truncated_file() {
+    let dir = scratch_dir("cli");
+    let text = std::fs::read_to_string(data("excerpt_Bearing1_2_first40.csv")).unwrap();
+    let bad = dir.join("Bearing_truncated.csv");
+    std::fs::write(&bad, &text[..text.len() / 2]).unwrap();
+    assert_eq!(prognos_sim::edge_cloud::cli_edge_cloud(&bad, None), 2);
+    let bad_config = dir.join("c.toml");
+    std::fs::write(&bad_config, "nonsense_key = 1\n").unwrap();
+    assert_eq!(
+        prognos_sim::edge_cloud::cli_edge_cloud(&data("Bearing3_1.csv"), Some(&bad_config)),
+        2
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -469,3 +469,49 @@ pub fn run_bearing(
     output::write_all(&dir, &run, config)?;
     Ok((run, dir))
 }
+
+/// What `prognos edge-cloud --bearing-csv FILE [--config FILE]` does: runs [`run_bearing`],
+/// prints a short summary on stdout or the error on stderr, and returns the exit status
+/// (0, 2 for a malformed bearing or config file, 1 for other failures).
+pub fn cli_edge_cloud(bearing_csv: &Path, config_file: Option<&Path>) -> i32 {
+    let result = config_file
+        .map_or_else(
+            || Ok(EdgeCloudConfig::default()),
+            EdgeCloudConfig::from_toml_file,
+        )
+        .and_then(|config| run_bearing(bearing_csv, &config).map(|r| (r, config)));
+    match result {
+        Ok(((run, dir), config)) => {
+            let s = &run.summary;
+            let minutes = |v: Option<f64>| {
+                v.map_or_else(|| "none".into(), |t| format!("{:.2} min", t / 60.0))
+            };
+            println!("bearing            {}", s.bearing);
+            println!(
+                "end of life        {:.2} min ({} snapshots)",
+                s.end_of_life_s / 60.0,
+                s.snapshots
+            );
+            println!("prognosis trigger  {}", minutes(s.trigger_s));
+            println!("stage change       {}", minutes(s.change_s));
+            println!("HI_NRMSE alarm     {}", minutes(s.first_nrmse_alarm_s));
+            println!(
+                "prognostic horizon {} (alpha {}, {:.1} % of life)",
+                minutes(s.prognostic_horizon_s),
+                config.alpha,
+                100.0 * s.prognostic_horizon_fraction
+            );
+            println!(
+                "edge to cloud      {:.1} B/s of model parameters vs {:.0} B/s raw ({:.0}x less)",
+                s.data_rate.model_bytes_per_s, s.data_rate.raw_bytes_per_s, s.data_rate.reduction
+            );
+            println!("rejected snapshots {}", s.edge_rejections);
+            println!("outputs            {}", dir.display());
+            0
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            e.exit_code()
+        }
+    }
+}
