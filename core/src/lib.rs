@@ -27,6 +27,7 @@ pub mod learn;
 pub mod metrics;
 pub mod model;
 pub mod pipeline;
+pub mod plants;
 pub mod prognose;
 pub mod random;
 pub mod real;
