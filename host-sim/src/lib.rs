@@ -10,6 +10,7 @@
 pub mod campaign;
 pub mod cli;
 pub mod dataio;
+pub mod edge_cloud;
 pub mod error;
 pub mod linear_degradation;
 pub mod lockstep;
