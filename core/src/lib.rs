@@ -24,6 +24,7 @@ pub mod error;
 pub mod filter;
 pub mod metrics;
 pub mod model;
+pub mod plants;
 pub mod prognose;
 pub mod random;
 pub mod real;

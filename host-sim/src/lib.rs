@@ -1,1 +1,3 @@
+//! Prognos host simulator: truth plants, lockstep campaigns and paper reproductions.
 
+pub mod plants;

@@ -1,0 +1,3 @@
+//! Estimation models of the monitored systems.
+
+pub mod scooter;

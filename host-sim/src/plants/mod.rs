@@ -1,0 +1,3 @@
+//! Simulated truth plants.
+
+pub mod scooter;
