@@ -183,9 +183,11 @@ impl<T: Real> ScooterModel<T> {
     /// Nominal augmented state at rest: zero motion, `beta = 1`, nominal `R_rv` and `K1`.
     pub fn nominal_state(&self) -> SVector<T, NX> {
         let mut x = SVector::<T, NX>::zeros();
-        x[BETA_THETA_R] = T::one();
-        x[R_RV] = self.params.r_rv;
-        x[K1] = self.params.k1;
+        x.fixed_rows_mut::<3>(BETA_THETA_R).copy_from(&Vector3::new(
+            T::one(),
+            self.params.r_rv,
+            self.params.k1,
+        ));
         x
     }
 }

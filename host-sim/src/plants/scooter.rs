@@ -79,9 +79,9 @@ pub struct SensorNoise {
 impl Default for SensorNoise {
     fn default() -> Self {
         Self {
-            rear: 2e-3,
-            body: 2e-4,
-            front: 2e-3,
+            rear: 1e-3,
+            body: 1e-4,
+            front: 1e-3,
         }
     }
 }
@@ -187,7 +187,8 @@ impl ScooterPlant {
         }
     }
 
-    /// Advances by `dt` under the profile's input and returns `(u, y)` sampled at the new time:
+    /// Advances by `dt` under the profile's input and returns `(u, y)`: `u` is the input held
+    /// over the step (zero-order hold) and `y` is sampled at the new time,
     /// `y = [beta_theta_r omega_r, v_m, omega_f] + noise` (the body and front sensors are
     /// healthy, efficiency 1).
     pub fn sample<R: Rng + ?Sized>(&mut self, dt: f64, rng: &mut R) -> (f64, Vector3<f64>) {
@@ -203,6 +204,6 @@ impl ScooterPlant {
             normal(rng, self.state[V_M], self.noise.body),
             normal(rng, self.state[OMEGA_F], self.noise.front),
         );
-        (self.profile.input(self.time), y)
+        (u, y)
     }
 }

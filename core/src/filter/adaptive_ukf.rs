@@ -1,0 +1,353 @@
+//! Adaptive UKFs of Yu et al. (2020), built on [`Ukf`]: covariance matching of `Q` and `R`
+//! over a window of innovations (AUKF, Eq. 7) and, in addition, enhancement of the posterior
+//! covariance `P <- tau P` when an auxiliary detector fires (AEUKF, Eq. 6).
+//!
+//! Eq. 7 as printed adds a matrix to a vector; we use the standard reading of covariance
+//! matching (Mohamed & Schwarz 1999): with `C = (1/L) sum e e^T` over the last `L`
+//! innovations, `R = C - sum W_c (y_i - y^-)(y_i - y^-)^T = C - (S - R_used)`, and
+//! `Q = K C K^T`, estimated as the window mean of the state corrections
+//! `dx dx^T = K e e^T K^T` (equal when the gain is constant over the window).
+
+use crate::error::Error;
+use crate::filter::ukf::{Ukf, UkfReport};
+use crate::model::{Model, Observe};
+use crate::real::{Real, all_finite, cast};
+use crate::safeguard::{Flags, floor_variances, symmetrise};
+use nalgebra::{Cholesky, SMatrix, SVector};
+
+/// Which filter variant runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Adaptation {
+    /// Plain UKF with fixed `Q` and `R`.
+    None,
+    /// AUKF: `Q` and `R` by covariance matching.
+    CovarianceMatching,
+    /// AEUKF: covariance matching plus covariance enhancement.
+    Enhanced,
+}
+
+/// Configuration of the adaptive layer.
+#[derive(Clone, Copy, Debug)]
+pub struct AdaptiveConfig<T: Real, const NX: usize, const NY: usize> {
+    pub mode: Adaptation,
+    /// Enhancement factor `tau` (the paper's 5).
+    pub tau: T,
+    /// Diagonal floor of the matched `Q` (keeps parameter random walks alive).
+    pub q_floor: SVector<T, NX>,
+    /// Diagonal ceiling of the matched `Q`: matching `Q` from the filter's own corrections is
+    /// a positive feedback (large `Q`, large gain, large corrections) for weakly observable
+    /// parameters, so each variance is capped.
+    pub q_ceiling: SVector<T, NX>,
+    /// Diagonal floor of the matched `R`.
+    pub r_floor: SVector<T, NY>,
+    /// Floor for repairing a state covariance that lost positive definiteness.
+    pub p_floor: T,
+    /// Which states the enhancement scales (1 = enhance, 0 = keep): their variances are
+    /// multiplied by `tau` and their cross-covariances with the other states cleared. All
+    /// ones is the paper's `P <- tau P` up to the cleared cross terms.
+    pub enhance_mask: SVector<T, NX>,
+    /// Physical bounds of the state (e.g. a stiffness cannot be negative); an estimate
+    /// outside is clamped and flagged [`Flags::BOUNDS_CLAMPED`].
+    pub lower: SVector<T, NX>,
+    pub upper: SVector<T, NX>,
+}
+
+impl<T: Real, const NX: usize, const NY: usize> AdaptiveConfig<T, NX, NY> {
+    /// A configuration with the paper's whole-covariance enhancement and no bounds.
+    pub fn new(
+        mode: Adaptation,
+        tau: T,
+        q_floor: SVector<T, NX>,
+        q_ceiling: SVector<T, NX>,
+        r_floor: SVector<T, NY>,
+    ) -> Self {
+        Self {
+            mode,
+            tau,
+            q_floor,
+            q_ceiling,
+            r_floor,
+            p_floor: cast(1e-12),
+            enhance_mask: SVector::repeat(T::one()),
+            lower: SVector::repeat(-T::MAX_FINITE),
+            upper: SVector::repeat(T::MAX_FINITE),
+        }
+    }
+}
+
+/// What one adaptive step did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdaptiveReport<T: Real, const NY: usize> {
+    /// The underlying UKF update (innovation, S, NIS).
+    pub update: UkfReport<T, NY>,
+    /// Whether `P` was enhanced this step.
+    pub enhanced: bool,
+    /// Safeguards that acted (union of the UKF's and the adaptive layer's).
+    pub flags: Flags,
+}
+
+/// UKF with covariance matching and enhancement; `L` is the matching window.
+#[derive(Clone, Debug)]
+pub struct AdaptiveUkf<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize> {
+    ukf: Ukf<T, NX, NS>,
+    r: SMatrix<T, NY, NY>,
+    config: AdaptiveConfig<T, NX, NY>,
+    innovations: [SVector<T, NY>; L],
+    corrections: [SVector<T, NX>; L],
+    head: usize,
+    filled: usize,
+}
+
+impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
+    AdaptiveUkf<T, NX, NS, NY, L>
+{
+    /// Wraps `ukf` with initial measurement noise `r0` (positive definite).
+    pub fn new(
+        ukf: Ukf<T, NX, NS>,
+        r0: SMatrix<T, NY, NY>,
+        config: AdaptiveConfig<T, NX, NY>,
+    ) -> Result<Self, Error> {
+        if L == 0 {
+            return Err(Error::InvalidParameter("window L must be positive"));
+        }
+        if !all_finite(r0.as_slice()) || Cholesky::new(r0).is_none() {
+            return Err(Error::NotPositiveDefinite);
+        }
+        if !(config.tau >= T::one())
+            || !config.tau.finite()
+            || !all_finite(config.q_floor.as_slice())
+            || !all_finite(config.q_ceiling.as_slice())
+            || !all_finite(config.r_floor.as_slice())
+            || !(config.p_floor > T::zero())
+            || !all_finite(config.enhance_mask.as_slice())
+            || config
+                .lower
+                .iter()
+                .zip(config.upper.iter())
+                .any(|(lo, hi)| !(lo <= hi))
+        {
+            return Err(Error::InvalidParameter("tau, q_floor, r_floor or p_floor"));
+        }
+        Ok(Self {
+            ukf,
+            r: r0,
+            config,
+            innovations: [SVector::zeros(); L],
+            corrections: [SVector::zeros(); L],
+            head: 0,
+            filled: 0,
+        })
+    }
+
+    /// The wrapped UKF (state, covariance, Q).
+    pub fn ukf(&self) -> &Ukf<T, NX, NS> {
+        &self.ukf
+    }
+    /// Mutable access to the wrapped UKF (e.g. to re-initialise parameter covariances).
+    pub fn ukf_mut(&mut self) -> &mut Ukf<T, NX, NS> {
+        &mut self.ukf
+    }
+    /// Current measurement noise covariance.
+    pub fn measurement_noise(&self) -> &SMatrix<T, NY, NY> {
+        &self.r
+    }
+    /// Configuration.
+    pub fn config(&self) -> &AdaptiveConfig<T, NX, NY> {
+        &self.config
+    }
+
+    /// Repairs a state covariance that is no longer positive definite: symmetrise, then
+    /// replace by its diagonal raised to `p_floor` (a conservative, flagged repair).
+    fn repair_covariance(&mut self) -> Result<(), Error> {
+        let mut p = *self.ukf.covariance();
+        symmetrise(&mut p);
+        let floor = self.config.p_floor;
+        let diagonal = p
+            .diagonal()
+            .map(|v| if v.finite() && v > floor { v } else { floor });
+        self.ukf
+            .set_covariance(SMatrix::<T, NX, NX>::from_diagonal(&diagonal))
+    }
+
+    /// One predict-update cycle over `dt` with input `u` and measurement `y`; when `enhance`
+    /// (the auxiliary detector fired on `y`) and the mode is [`Adaptation::Enhanced`], the
+    /// previous posterior covariance is multiplied by `tau` before the cycle. Errors leave the filter unchanged, except that a
+    /// covariance found not positive definite is repaired once (flagged
+    /// [`Flags::CHOLESKY_REPAIRED`]) before the step is retried.
+    pub fn step<M, const NU: usize>(
+        &mut self,
+        model: &M,
+        u: &SVector<T, NU>,
+        y: &[T],
+        dt: T,
+        enhance: bool,
+    ) -> Result<AdaptiveReport<T, NY>, Error>
+    where
+        M: Model<T, NX, NU> + Observe<T, NX, NU, NY>,
+    {
+        if y.len() != NY {
+            return Err(Error::MeasurementLength {
+                expected: NY,
+                got: y.len(),
+            });
+        }
+        if !all_finite(y) {
+            return Err(Error::NonFiniteMeasurement);
+        }
+        let saved = self.ukf.clone();
+        let mut flags = Flags::NONE;
+        // Eq. 6: the detector fired on this sample, so the posterior of the previous step is
+        // enhanced before it meets the measurement that carries the sudden change.
+        let mut enhanced = false;
+        if enhance && self.config.mode == Adaptation::Enhanced {
+            let root = self.config.tau.sqrt();
+            let scale = self
+                .config
+                .enhance_mask
+                .map(|m| if m > T::zero() { root } else { T::one() });
+            let d = SMatrix::<T, NX, NX>::from_diagonal(&scale);
+            let mut p = d * self.ukf.covariance() * d;
+            // The enhanced states lose their cross-covariances: correlations learnt while the
+            // parameter was constant would otherwise steer the sudden change into the
+            // correlated states. A PD matrix stays PD when a row/column pair is decoupled.
+            for (i, m) in self.config.enhance_mask.iter().enumerate() {
+                if *m > T::zero() {
+                    for j in 0..NX {
+                        if j != i {
+                            if let Some(v) = p.get_mut((i, j)) {
+                                *v = T::zero();
+                            }
+                            if let Some(v) = p.get_mut((j, i)) {
+                                *v = T::zero();
+                            }
+                        }
+                    }
+                }
+            }
+            if self.ukf.set_covariance(p).is_ok() {
+                enhanced = true;
+                flags.insert(Flags::COVARIANCE_ENHANCED);
+            }
+        }
+        let predicted = match self.ukf.predict(model, u, dt) {
+            Err(Error::NotPositiveDefinite) => {
+                self.repair_covariance()?;
+                flags.insert(Flags::CHOLESKY_REPAIRED);
+                self.ukf.predict(model, u, dt)
+            }
+            other => other,
+        };
+        let predict_flags = match predicted {
+            Ok(f) => f,
+            Err(e) => {
+                self.ukf = saved;
+                return Err(e);
+            }
+        };
+        flags.insert(predict_flags);
+        let prior = *self.ukf.state();
+        let update = match self.ukf.update(model, u, y, &self.r) {
+            Ok(rep) => rep,
+            Err(e) => {
+                self.ukf = saved;
+                return Err(e);
+            }
+        };
+        flags.insert(update.flags);
+        let state = *self.ukf.state();
+        let clamped = state.zip_zip_map(&self.config.lower, &self.config.upper, |x, lo, hi| {
+            x.max(lo).min(hi)
+        });
+        if clamped != state && self.ukf.set_state(clamped).is_ok() {
+            flags.insert(Flags::BOUNDS_CLAMPED);
+        }
+        if update.fused {
+            let correction = self.ukf.state() - prior;
+            if let (Some(e), Some(c)) = (
+                self.innovations.get_mut(self.head),
+                self.corrections.get_mut(self.head),
+            ) {
+                *e = update.innovation;
+                *c = correction;
+            }
+            self.head = (self.head + 1) % L;
+            self.filled = (self.filled + 1).min(L);
+        }
+        if self.config.mode != Adaptation::None && self.filled == L {
+            flags.insert(self.match_covariances(&update.innovation_cov));
+        }
+        Ok(AdaptiveReport {
+            update,
+            enhanced,
+            flags,
+        })
+    }
+
+    /// Eq. 7 (see the module note): new `Q` and `R` from the window.
+    fn match_covariances(&mut self, s: &SMatrix<T, NY, NY>) -> Flags {
+        let mut flags = Flags::NONE;
+        let n: T = cast(L as f64);
+        let mut c = SMatrix::<T, NY, NY>::zeros();
+        for e in self.innovations.iter() {
+            c += e * e.transpose();
+        }
+        c /= n;
+        // Only the diagonal of K C K^T is kept: the window is shorter than needed to estimate
+        // cross-covariances of nine states reliably.
+        let mut q_diagonal = SVector::<T, NX>::zeros();
+        for dx in self.corrections.iter() {
+            q_diagonal += dx.component_mul(dx);
+        }
+        q_diagonal /= n;
+        let q_diagonal = q_diagonal.zip_map(&self.config.q_ceiling, |v, c| v.min(c));
+        let mut q = SMatrix::<T, NX, NX>::from_diagonal(&q_diagonal);
+        if floor_diagonal(&mut q, &self.config.q_floor) {
+            flags.insert(Flags::VARIANCE_FLOOR);
+        }
+        if self.ukf.set_process_noise(q).is_err() {
+            flags.insert(Flags::MEASUREMENT_REJECTED);
+        }
+        // R = C - (S - R_used), kept positive definite.
+        let mut r = c - (s - self.r);
+        symmetrise(&mut r);
+        if floor_diagonal(&mut r, &self.config.r_floor) {
+            flags.insert(Flags::VARIANCE_FLOOR);
+        }
+        if !all_finite(r.as_slice()) || Cholesky::new(r).is_none() {
+            // Keep only the (floored) diagonal.
+            let mut d = SMatrix::<T, NY, NY>::from_diagonal(&r.diagonal());
+            floor_variances(&mut d, T::MIN_POSITIVE.sqrt());
+            r = d;
+            flags.insert(Flags::CHOLESKY_REPAIRED);
+        }
+        if all_finite(r.as_slice()) {
+            self.r = r;
+        }
+        flags
+    }
+}
+
+/// Raises each diagonal entry of `m` to at least the matching entry of `floor` (NaN entries
+/// too). Returns true when any entry was raised.
+fn floor_diagonal<T: Real, const N: usize>(
+    m: &mut SMatrix<T, N, N>,
+    floor: &SVector<T, N>,
+) -> bool {
+    let diagonal = m.diagonal();
+    let mut raised = false;
+    let new = diagonal.zip_map(floor, |v, f| {
+        if v >= f {
+            v
+        } else {
+            raised = true;
+            f
+        }
+    });
+    for (i, v) in new.iter().enumerate() {
+        if let Some(entry) = m.get_mut((i, i)) {
+            *entry = *v;
+        }
+    }
+    raised
+}
