@@ -351,3 +351,173 @@ fn floor_diagonal<T: Real, const N: usize>(
     }
     raised
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::ukf::SigmaParams;
+    use crate::random::normal;
+    use nalgebra::{Matrix1, Matrix2, Vector1, Vector2};
+    use rand_core::SeedableRng;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    /// State `[level, gain]`, measurement `gain * level`; the level is held at 1 by the
+    /// model, so the measurement reveals the gain (like `beta_theta_r * omega_r`).
+    struct Gain;
+    impl Model<f64, 2, 1> for Gain {
+        fn step(&self, x: &Vector2<f64>, _u: &Vector1<f64>, _dt: f64) -> Vector2<f64> {
+            Vector2::new(x[0] + 0.5 * (1.0 - x[0]), x[1])
+        }
+    }
+    impl Observe<f64, 2, 1, 1> for Gain {
+        fn observe(&self, x: &Vector2<f64>, _u: &Vector1<f64>) -> Vector1<f64> {
+            Vector1::new(x[0] * x[1])
+        }
+    }
+
+    fn filter(mode: Adaptation, r0: f64) -> AdaptiveUkf<f64, 2, 5, 1, 20> {
+        let ukf = Ukf::new(
+            Vector2::new(1.0, 1.0),
+            Matrix2::from_diagonal(&Vector2::new(1e-4, 1e-2)),
+            Matrix2::from_diagonal(&Vector2::new(1e-8, 1e-8)),
+            SigmaParams::default(),
+        )
+        .unwrap();
+        let config = AdaptiveConfig::new(
+            mode,
+            5.0,
+            Vector2::new(1e-10, 1e-10),
+            Vector2::new(1e-4, 1e-4),
+            Vector1::new(1e-8),
+        );
+        AdaptiveUkf::new(ukf, Matrix1::new(r0), config).unwrap()
+    }
+
+    /// Runs a gain step 1 -> 0.7 at k = 200 and returns the gain estimate 25 samples later.
+    fn gain_after_step(mode: Adaptation) -> f64 {
+        let mut f = filter(mode, 1e-4);
+        f.config.enhance_mask = Vector2::new(0.0, 1.0);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(7);
+        let u = Vector1::new(0.0);
+        let mut estimate = 0.0;
+        for k in 0..225 {
+            let gain = if k >= 200 { 0.7 } else { 1.0 };
+            let y = normal(&mut rng, gain, 0.01);
+            let fire = (200..203).contains(&k);
+            let report = f.step(&Gain, &u, &[y], 0.02, fire).unwrap();
+            assert_eq!(report.enhanced, fire && mode == Adaptation::Enhanced);
+            estimate = f.ukf().state()[1];
+        }
+        estimate
+    }
+
+    #[test]
+    fn enhancement_tracks_a_step_that_the_plain_ukf_lags() {
+        let plain = gain_after_step(Adaptation::None);
+        let enhanced = gain_after_step(Adaptation::Enhanced);
+        assert!(
+            (enhanced - 0.7).abs() < 0.01,
+            "AEUKF {enhanced}, UKF {plain}"
+        );
+        assert!((plain - 0.7).abs() > 0.05, "UKF should lag: {plain}");
+    }
+
+    #[test]
+    fn covariance_matching_recovers_the_measurement_noise() {
+        // True noise variance 4e-4, initial guess 100 times too small.
+        let mut f = filter(Adaptation::CovarianceMatching, 4e-6);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(11);
+        let u = Vector1::new(0.0);
+        let mut sum = 0.0;
+        for k in 0..2000 {
+            let y = normal(&mut rng, 1.0, 0.02);
+            f.step(&Gain, &u, &[y], 0.02, false).unwrap();
+            if k >= 1000 {
+                sum += f.measurement_noise()[(0, 0)];
+            }
+        }
+        let r = sum / 1000.0;
+        assert!((r / 4e-4 - 1.0).abs() < 0.25, "matched R {r}");
+    }
+
+    #[test]
+    fn bad_samples_are_rejected_and_leave_the_filter_unchanged() {
+        let mut f = filter(Adaptation::Enhanced, 1e-4);
+        let u = Vector1::new(0.0);
+        f.step(&Gain, &u, &[1.0], 0.02, false).unwrap();
+        let (x, p) = (*f.ukf().state(), *f.ukf().covariance());
+        assert_eq!(
+            f.step(&Gain, &u, &[f64::NAN], 0.02, true).unwrap_err(),
+            Error::NonFiniteMeasurement
+        );
+        assert_eq!(
+            f.step(&Gain, &u, &[1.0, 2.0], 0.02, false).unwrap_err(),
+            Error::MeasurementLength {
+                expected: 1,
+                got: 2
+            }
+        );
+        assert_eq!(
+            f.step(&Gain, &u, &[1.0], -0.02, false).unwrap_err(),
+            Error::InvalidTimeStep
+        );
+        assert_eq!(
+            f.step(&Gain, &Vector1::new(f64::INFINITY), &[1.0], 0.02, false)
+                .unwrap_err(),
+            Error::NonFiniteInput
+        );
+        assert_eq!(*f.ukf().state(), x);
+        assert_eq!(*f.ukf().covariance(), p);
+    }
+
+    /// Collapses every state to a constant: with `Q = 0` the covariance becomes singular.
+    struct Collapse;
+    impl Model<f64, 2, 1> for Collapse {
+        fn step(&self, _x: &Vector2<f64>, _u: &Vector1<f64>, _dt: f64) -> Vector2<f64> {
+            Vector2::new(1.0, 1.0)
+        }
+    }
+    impl Observe<f64, 2, 1, 1> for Collapse {
+        fn observe(&self, x: &Vector2<f64>, _u: &Vector1<f64>) -> Vector1<f64> {
+            Vector1::new(x[0])
+        }
+    }
+
+    #[test]
+    fn a_covariance_that_loses_definiteness_is_repaired_and_flagged() {
+        let ukf = Ukf::new(
+            Vector2::new(1.0, 1.0),
+            Matrix2::identity(),
+            Matrix2::zeros(),
+            SigmaParams::default(),
+        )
+        .unwrap();
+        let config = AdaptiveConfig::new(
+            Adaptation::None,
+            5.0,
+            Vector2::zeros(),
+            Vector2::zeros(),
+            Vector1::new(1e-8),
+        );
+        let mut f: AdaptiveUkf<f64, 2, 5, 1, 4> =
+            AdaptiveUkf::new(ukf, Matrix1::new(1e-2), config).unwrap();
+        let u = Vector1::new(0.0);
+        let first = f.step(&Collapse, &u, &[1.0], 0.02, false).unwrap();
+        assert!(!first.flags.contains(Flags::CHOLESKY_REPAIRED));
+        // P is now zero: the next prediction cannot factor it.
+        let second = f.step(&Collapse, &u, &[1.0], 0.02, false).unwrap();
+        assert!(second.flags.contains(Flags::CHOLESKY_REPAIRED));
+        assert!(f.ukf().state().iter().all(|v| v.is_finite()));
+        assert!(f.ukf().covariance().iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn bounds_clamp_the_estimate_and_flag_it() {
+        let mut f = filter(Adaptation::None, 1e-4);
+        f.config.upper = Vector2::new(10.0, 0.95);
+        let u = Vector1::new(0.0);
+        let report = f.step(&Gain, &u, &[1.2], 0.02, false).unwrap();
+        assert!(report.flags.contains(Flags::BOUNDS_CLAMPED));
+        assert_eq!(f.ukf().state()[1], 0.95);
+    }
+}
