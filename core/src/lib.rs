@@ -25,6 +25,7 @@ pub mod error;
 pub mod filter;
 pub mod metrics;
 pub mod model;
+pub mod pipeline;
 pub mod plants;
 pub mod prognose;
 pub mod random;

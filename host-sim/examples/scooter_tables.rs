@@ -5,4 +5,5 @@ fn main() {
     let runs = args.next().and_then(|s| s.parse().ok()).unwrap_or(20);
     let seed = args.next().and_then(|s| s.parse().ok()).unwrap_or(1);
     print!("{}", prognos_sim::scooter::tables(runs, seed));
+    print!("{}", prognos_sim::scooter::table5_text(runs, seed));
 }

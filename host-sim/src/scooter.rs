@@ -2,91 +2,28 @@
 //! FDI and UKF/AUKF/AEUKF, and the reproduction of Tables 4 and 6.
 
 use crate::plants::scooter::{Profile, ScooterPlant, SensorNoise};
-use nalgebra::{SMatrix, SVector, Vector1};
-use prognos_core::diagnose::scooter::ScooterArr;
-use prognos_core::filter::adaptive_ukf::{Adaptation, AdaptiveConfig, AdaptiveUkf};
-use prognos_core::filter::ukf::{SigmaParams, Ukf};
-use prognos_core::plants::scooter::{BETA_THETA_R, K1, NS, NX, NY, R_RV, ScooterModel};
+use prognos_core::filter::adaptive_ukf::Adaptation;
+use prognos_core::pipeline::scooter::{Scooter, ScooterConfig};
+use prognos_core::plants::scooter::{BETA_THETA_R, K1, R_RV};
+use prognos_core::prognose::sequential::Outcome;
+use prognos_core::real::{Real, cast};
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
+/// Monte-Carlo samples per RUL prediction (the paper's M).
+pub const MONTE_CARLO_SAMPLES: usize = 80;
 /// Sampling time (s).
 pub const DT: f64 = 0.02;
-/// Covariance-matching window (samples).
-pub const WINDOW: usize = 25;
-/// Auxiliary-detector threshold `Psi_0` (paper: 760).
-pub const PSI_THRESHOLD: f64 = 760.0;
-
-/// The scooter's adaptive filter type.
-pub type ScooterFilter = AdaptiveUkf<f64, NX, NS, NY, WINDOW>;
-
-/// Filter tuning shared by the three variants.
-#[derive(Clone, Copy, Debug)]
-pub struct Tuning {
-    pub p0: SVector<f64, NX>,
-    pub q0: SVector<f64, NX>,
-    pub r0: SVector<f64, NY>,
-    pub tau: f64,
-    pub q_floor: SVector<f64, NX>,
-    pub q_ceiling: SVector<f64, NX>,
-    pub r_floor: SVector<f64, NY>,
-}
-
-impl Default for Tuning {
-    fn default() -> Self {
-        Self {
-            p0: SVector::<f64, NX>::from_column_slice(&[
-                1e-4, 1e-4, 1e-6, 1e-4, 1e-4, 1e-4, 0.05, 0.3, 0.01,
-            ]),
-            q0: SVector::<f64, NX>::from_column_slice(&[
-                1e-8, 1e-6, 1e-10, 1e-8, 1e-8, 1e-6, 1e-10, 1e-10, 1e-10,
-            ]),
-            r0: SVector::<f64, NY>::new(1e-6, 1e-8, 1e-6),
-            tau: 5.0,
-            q_floor: SVector::<f64, NX>::from_column_slice(&[
-                1e-12, 1e-10, 1e-14, 1e-12, 1e-12, 1e-10, 1e-10, 1e-10, 1e-12,
-            ]),
-            q_ceiling: SVector::<f64, NX>::from_column_slice(&[
-                1e-6, 1e-6, 1e-8, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-9,
-            ]),
-            r_floor: SVector::<f64, NY>::new(1e-8, 1e-10, 1e-8),
-        }
-    }
-}
-
-/// Builds a filter of the given variant at the nominal rest state.
-pub fn build_filter(mode: Adaptation, tuning: &Tuning) -> ScooterFilter {
-    let model = ScooterModel::<f64>::nominal();
-    let ukf = Ukf::new(
-        model.nominal_state(),
-        SMatrix::from_diagonal(&tuning.p0),
-        SMatrix::from_diagonal(&tuning.q0),
-        SigmaParams::default(),
-    )
-    .expect("valid scooter tuning");
-    AdaptiveUkf::new(
-        ukf,
-        SMatrix::from_diagonal(&tuning.r0),
-        AdaptiveConfig {
-            enhance_mask: SVector::<f64, NX>::from_column_slice(&[
-                0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0,
-            ]),
-            lower: SVector::<f64, NX>::from_column_slice(&[
-                -1e9, -1e9, -1e9, -1e9, -1e9, -1e9, 0.05, 0.0, 5.0,
-            ]),
-            upper: SVector::<f64, NX>::from_column_slice(&[
-                1e9, 1e9, 1e9, 1e9, 1e9, 1e9, 1.5, 5.0, 20.0,
-            ]),
-            ..AdaptiveConfig::new(
-                mode,
-                tuning.tau,
-                tuning.q_floor,
-                tuning.q_ceiling,
-                tuning.r_floor,
-            )
-        },
-    )
-    .expect("valid adaptive configuration")
+/// One RUL prediction made during a run (Eqs. 16-18 with M = 80).
+#[derive(Clone, Debug)]
+pub struct RulPrediction {
+    /// Usage index (1 under `Upsilon_f`, 2 after the first reactivation).
+    pub usage: u8,
+    /// Time of the prediction (`t_d1` or the reactivation moment).
+    pub time: f64,
+    /// Deterministic RUL of the identified segment and the Monte-Carlo samples.
+    pub rul: f64,
+    pub samples: Vec<f64>,
 }
 
 /// Time series of one run.
@@ -99,70 +36,76 @@ pub struct RunTrace {
     pub k1: Vec<f64>,
     pub psi: Vec<f64>,
     pub cv: Vec<u8>,
-    /// Times at which the auxiliary detector fired (rising edges).
+    /// Times at which the pipeline recognised a fault event.
     pub detections: Vec<f64>,
-    /// Time of the first persistent inconsistency (fault estimation activated).
+    /// Time fault estimation was activated.
     pub activation: Option<f64>,
+    /// RUL predictions, and whether a reactivation was refused by Eq. 9.
+    pub predictions: Vec<RulPrediction>,
+    pub refused_reactivation: bool,
 }
 
-/// Runs one experiment with one filter variant, in lockstep with the truth plant.
-pub fn run(profile: Profile, mode: Adaptation, tuning: &Tuning, seed: u64) -> RunTrace {
+/// Runs one experiment with one filter variant: the truth plant in lockstep with the core's
+/// [`Scooter`] pipeline in scalar type `T`.
+pub fn run_with<T: Real>(profile: Profile, mode: Adaptation, seed: u64) -> RunTrace {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut plant = ScooterPlant::new(profile, SensorNoise::default(), &mut rng);
-    let model = ScooterModel::<f64>::nominal();
-    let mut filter = build_filter(mode, tuning);
-    let mut arr = ScooterArr::<f64>::nominal();
+    let mut mc_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x5eed_0f_4a11);
+    let mut pipe = Scooter::<T>::new(T::zero(), ScooterConfig::new(mode)).expect("valid config");
     let mut trace = RunTrace::default();
     let steps = (profile.duration / DT).round() as usize;
-    let mut inconsistent_run = 0u32;
-    let mut above = false;
-    for _ in 0..steps {
+    for k in 1..=steps {
         let (u, y) = plant.sample(DT, &mut rng);
-        let t = plant.time;
-        let report = arr
-            .step(u, &[y[0], y[1], y[2]], DT)
-            .expect("finite samples");
-        inconsistent_run = if report.cv != 0 {
-            inconsistent_run + 1
-        } else {
-            0
-        };
-        if trace.activation.is_none() && inconsistent_run >= 10 {
+        // Time from the sample index: no drift from accumulating dt.
+        let t = k as f64 * DT;
+        let ys = [cast::<T>(y[0]), cast::<T>(y[1]), cast::<T>(y[2])];
+        let report = pipe.step(cast(t), cast(u), &ys).expect("clean samples");
+        if report.active && trace.activation.is_none() {
             trace.activation = Some(t);
-            // Fault estimation starts: re-open the fault-parameter covariances (P0).
-            let mut p = *filter.ukf().covariance();
-            for i in BETA_THETA_R..NX {
-                for j in 0..NX {
-                    if i != j {
-                        p[(i, j)] = 0.0;
-                        p[(j, i)] = 0.0;
-                    }
-                }
-                p[(i, i)] = tuning.p0[i];
-            }
-            filter.ukf_mut().set_covariance(p).expect("P0 block is PD");
         }
-        let fire = report.psi >= PSI_THRESHOLD;
-        if fire && !above {
+        if report.event.is_some() {
             trace.detections.push(t);
         }
-        let enhance = fire && trace.activation.is_some();
-        above = fire;
-        filter
-            .step(&model, &Vector1::new(u), y.as_slice(), DT, enhance)
-            .expect("filter step");
-        let x = filter.ukf().state();
+        match report.outcome {
+            Some(Outcome::Predicted(segment)) => {
+                let mut samples = [T::zero(); MONTE_CARLO_SAMPLES];
+                let ok = pipe
+                    .prognoser()
+                    .rul_samples(&mut mc_rng, &mut samples)
+                    .is_ok();
+                trace.predictions.push(RulPrediction {
+                    usage: segment.usage,
+                    time: t,
+                    rul: segment.rul().as_f64(),
+                    samples: if ok {
+                        samples
+                            .iter()
+                            .map(|v| v.as_f64())
+                            .filter(|v| *v < 1e30)
+                            .collect()
+                    } else {
+                        Vec::new()
+                    },
+                });
+            }
+            Some(Outcome::NotReactivated(_)) => trace.refused_reactivation = true,
+            _ => {}
+        }
+        let x = report.state;
         trace.time.push(t);
-        trace.beta.push(x[BETA_THETA_R]);
-        trace
-            .beta_var
-            .push(filter.ukf().covariance()[(BETA_THETA_R, BETA_THETA_R)]);
-        trace.r_rv.push(x[R_RV]);
-        trace.k1.push(x[K1]);
-        trace.psi.push(report.psi);
-        trace.cv.push(report.cv);
+        trace.beta.push(x[BETA_THETA_R].as_f64());
+        trace.beta_var.push(report.beta_variance.as_f64());
+        trace.r_rv.push(x[R_RV].as_f64());
+        trace.k1.push(x[K1].as_f64());
+        trace.psi.push(report.arr.psi.as_f64());
+        trace.cv.push(report.arr.cv);
     }
     trace
+}
+
+/// [`run_with`] in f64.
+pub fn run(profile: Profile, mode: Adaptation, seed: u64) -> RunTrace {
+    run_with::<f64>(profile, mode, seed)
 }
 
 /// Mean of `values` over the samples whose time lies in `[from, to)`.
@@ -225,7 +168,6 @@ pub fn table(experiment: u8, runs: usize, seed: u64) -> Vec<TableRow> {
     } else {
         Profile::EXPERIMENT2
     };
-    let tuning = Tuning::default();
     let intervals = if experiment == 1 { 3 } else { 4 };
     [
         ("AEUKF", Adaptation::Enhanced),
@@ -235,7 +177,7 @@ pub fn table(experiment: u8, runs: usize, seed: u64) -> Vec<TableRow> {
     .iter()
     .map(|(name, mode)| {
         let per_run: Vec<RunEstimates> = (0..runs as u64)
-            .map(|r| estimates(&profile, &run(profile, *mode, &tuning, seed + r)))
+            .map(|r| estimates(&profile, &run(profile, *mode, seed + r)))
             .collect();
         let mut columns: Vec<Vec<f64>> = (0..intervals)
             .map(|i| per_run.iter().map(|e| e.beta[i]).collect())
@@ -328,6 +270,146 @@ pub fn tables(runs: usize, seed: u64) -> String {
             let _ = writeln!(out, "  {:<6} mean paper {}", row.filter, fmt(pm));
             let _ = writeln!(out, "  {:<6} std  ours  {}", row.filter, fmt(&row.std));
             let _ = writeln!(out, "  {:<6} std  paper {}", row.filter, fmt(ps));
+        }
+    }
+    out
+}
+
+/// Designed RULs: experiment 1 under usage 1 and 2, experiment 2 under usage 1.
+pub const DESIGNED_RUL: [f64; 3] = [18.98, 3.86, 14.8];
+
+/// The paper's Table 5 (RA, RSD in %; `None` where the paper marks the prediction
+/// unacceptable): rows exp1/usage1, exp1/usage2, exp2/usage1; filters AEUKF, AUKF, UKF.
+pub const PAPER_TABLE5: [[(Option<f64>, Option<f64>); 3]; 3] = [
+    [
+        (Some(94.15), Some(9.32)),
+        (Some(93.94), Some(9.06)),
+        (Some(90.57), Some(9.57)),
+    ],
+    [(Some(90.71), Some(11.59)), (None, None), (None, None)],
+    [
+        (Some(95.07), Some(8.28)),
+        (Some(93.51), Some(8.25)),
+        (Some(90.68), Some(8.31)),
+    ],
+];
+
+/// Prognosis summary of one (experiment, usage, filter) cell over the runs.
+#[derive(Clone, Debug)]
+pub struct PrognosisCell {
+    pub filter: &'static str,
+    /// Runs in which a prediction was made.
+    pub predicted: usize,
+    pub runs: usize,
+    /// Mean over runs of the Monte-Carlo mean RUL, of RA (%) and of RSD (%).
+    pub mean_rul: f64,
+    pub ra: f64,
+    pub rsd: f64,
+    /// Fraction of runs whose 95 % interval (2.5-97.5 percentiles) holds the true RUL.
+    pub coverage: f64,
+    /// Runs in which Eq. 9 refused a reactivation.
+    pub refused: usize,
+}
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    let idx = ((sorted.len() - 1) as f64 * q).round() as usize;
+    sorted[idx.min(sorted.len() - 1)]
+}
+
+/// Table 5: sequential prognosis over `runs` seeded runs per filter.
+pub fn table5(runs: usize, seed: u64) -> Vec<(u8, u8, Vec<PrognosisCell>)> {
+    use prognos_core::metrics::{relative_accuracy, relative_std};
+    let cases = [(1u8, 1u8, 0usize), (1, 2, 1), (2, 1, 2)];
+    let filters = [
+        ("AEUKF", Adaptation::Enhanced),
+        ("AUKF", Adaptation::CovarianceMatching),
+        ("UKF", Adaptation::None),
+    ];
+    let traces: Vec<Vec<Vec<RunTrace>>> = [Profile::EXPERIMENT1, Profile::EXPERIMENT2]
+        .iter()
+        .map(|profile| {
+            filters
+                .iter()
+                .map(|(_, mode)| {
+                    (0..runs as u64)
+                        .map(|r| run(*profile, *mode, seed + r))
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    cases
+        .iter()
+        .map(|&(experiment, usage, truth_index)| {
+            let truth = DESIGNED_RUL[truth_index];
+            let cells = filters
+                .iter()
+                .enumerate()
+                .map(|(fi, (name, _))| {
+                    let runs_here = &traces[usize::from(experiment - 1)][fi];
+                    let (mut rul, mut ra, mut rsd, mut covered, mut n) = (0.0, 0.0, 0.0, 0, 0);
+                    for trace in runs_here {
+                        let Some(p) = trace.predictions.iter().find(|p| p.usage == usage) else {
+                            continue;
+                        };
+                        if p.samples.len() < 2 {
+                            continue;
+                        }
+                        let mean = p.samples.iter().sum::<f64>() / p.samples.len() as f64;
+                        let mut sorted = p.samples.clone();
+                        sorted.sort_by(f64::total_cmp);
+                        let (lo, hi) = (percentile(&sorted, 0.025), percentile(&sorted, 0.975));
+                        rul += mean;
+                        ra += relative_accuracy(truth, mean).unwrap_or(f64::NAN);
+                        rsd += relative_std(&p.samples).unwrap_or(f64::NAN);
+                        covered += usize::from(lo <= truth && truth <= hi);
+                        n += 1;
+                    }
+                    let d = n.max(1) as f64;
+                    PrognosisCell {
+                        filter: name,
+                        predicted: n,
+                        runs,
+                        mean_rul: rul / d,
+                        ra: ra / d,
+                        rsd: rsd / d,
+                        coverage: covered as f64 / d,
+                        refused: runs_here.iter().filter(|t| t.refused_reactivation).count(),
+                    }
+                })
+                .collect();
+            (experiment, usage, cells)
+        })
+        .collect()
+}
+
+/// Table 5 as text, ours beside the paper's.
+pub fn table5_text(runs: usize, seed: u64) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "Table 5 ({runs} runs, M = {MONTE_CARLO_SAMPLES}): RA and RSD in %, ours (paper)"
+    );
+    for (row, (experiment, usage, cells)) in table5(runs, seed).iter().enumerate() {
+        let truth = DESIGNED_RUL[row];
+        for (col, c) in cells.iter().enumerate() {
+            let (pra, prsd) = PAPER_TABLE5[row][col];
+            let show = |v: Option<f64>| v.map_or("x".to_string(), |x| format!("{x:.2}"));
+            let _ = writeln!(
+                out,
+                "  exp {experiment} usage {usage} {:<6} RUL* {truth:>5.2}  mean RUL {:>6.2}  RA {:>6.2} ({:>5})  RSD {:>5.2} ({:>5})  in 95% CI {:>3.0}%  predicted {}/{}  refused reactivation {}",
+                c.filter,
+                c.mean_rul,
+                c.ra,
+                show(pra),
+                c.rsd,
+                show(prsd),
+                100.0 * c.coverage,
+                c.predicted,
+                c.runs,
+                c.refused
+            );
         }
     }
     out
