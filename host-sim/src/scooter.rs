@@ -50,7 +50,7 @@ pub struct RunTrace {
 pub fn run_with<T: Real>(profile: Profile, mode: Adaptation, seed: u64) -> RunTrace {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut plant = ScooterPlant::new(profile, SensorNoise::default(), &mut rng);
-    let mut mc_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x5eed_0f_4a11);
+    let mut mc_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x005e_ed0f_4a11);
     let mut pipe = Scooter::<T>::new(T::zero(), ScooterConfig::new(mode)).expect("valid config");
     let mut trace = RunTrace::default();
     let steps = (profile.duration / DT).round() as usize;
