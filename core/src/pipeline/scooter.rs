@@ -297,3 +297,101 @@ fn beta_variance<T: Real>(filter: &AdaptiveUkf<T, NX, NS, NY, WINDOW>) -> T {
         .copied()
         .unwrap_or(T::zero())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Model, Observe};
+    use crate::plants::scooter::{OMEGA_R, R_RV};
+
+    /// Noise-free nominal run with an `R_rv` fault from 2 s, as a deterministic truth.
+    fn samples(n: usize) -> [[f64; 3]; 400] {
+        let model = ScooterModel::<f64>::nominal();
+        let mut x = model.nominal_state();
+        let mut out = [[0.0; 3]; 400];
+        let u = Vector1::new(1.0);
+        for (k, slot) in out.iter_mut().enumerate().take(n) {
+            if k == 100 {
+                x[R_RV] = 0.469;
+            }
+            x = model.step(&x, &u, 0.02);
+            let y = model.observe(&x, &u);
+            *slot = [y[0], y[1], y[2]];
+        }
+        out
+    }
+
+    fn warmed_up() -> (Scooter<f64>, [[f64; 3]; 400]) {
+        let ys = samples(400);
+        let mut pipe = Scooter::new(0.0, ScooterConfig::new(Adaptation::Enhanced)).unwrap();
+        for (k, y) in ys.iter().enumerate().take(200) {
+            pipe.step((k + 1) as f64 * 0.02, 1.0, y).unwrap();
+        }
+        (pipe, ys)
+    }
+
+    #[test]
+    fn friction_fault_is_detected_isolated_and_estimated() {
+        let (mut pipe, ys) = warmed_up();
+        let mut last = None;
+        for (k, y) in ys.iter().enumerate().skip(200) {
+            last = Some(pipe.step((k + 1) as f64 * 0.02, 1.0, y).unwrap());
+        }
+        let report = last.unwrap();
+        // An R_rv fault alone violates only ARR1: CV = [1 0 0], candidate R_rv only.
+        assert_eq!(report.arr.cv, 0b001);
+        assert_eq!(report.suspected, crate::diagnose::scooter::fault::R_RV);
+        assert!(report.active);
+        assert!(
+            (report.state[R_RV] - 0.469).abs() < 0.01 * 0.469,
+            "{}",
+            report.state[R_RV]
+        );
+        assert!((report.state[BETA_THETA_R] - 1.0).abs() < 0.005);
+    }
+
+    #[test]
+    fn bad_samples_return_errors_and_change_nothing() {
+        let (mut pipe, ys) = warmed_up();
+        let t = 201.0 * 0.02;
+        let y = ys[200];
+        let before = (
+            *pipe.filter().ukf().state(),
+            *pipe.filter().ukf().covariance(),
+        );
+        let glitch = [y[0] + 40.0, y[1], y[2]];
+        assert_eq!(
+            pipe.step(t, 1.0, &glitch).unwrap_err(),
+            Error::OutOfRange("measurement jump (encoder glitch)")
+        );
+        assert!(matches!(
+            pipe.step(t, 1.0, &[1e6, y[1], y[2]]),
+            Err(Error::OutOfRange(_))
+        ));
+        assert_eq!(
+            pipe.step(t, 1.0, &[f64::NAN, y[1], y[2]]).unwrap_err(),
+            Error::NonFiniteMeasurement
+        );
+        assert_eq!(
+            pipe.step(t, f64::NAN, &y).unwrap_err(),
+            Error::NonFiniteInput
+        );
+        assert_eq!(
+            pipe.step(t - 1.0, 1.0, &y).unwrap_err(),
+            Error::InvalidTimeStep
+        );
+        assert!(matches!(
+            pipe.step(t, 1.0, &y[..2]),
+            Err(Error::MeasurementLength {
+                expected: 3,
+                got: 2
+            })
+        ));
+        assert_eq!(before.0, *pipe.filter().ukf().state());
+        assert_eq!(before.1, *pipe.filter().ukf().covariance());
+        // The clean sample is then accepted and the estimate is still sensible.
+        let report = pipe.step(t, 1.0, &y).unwrap();
+        assert!(report.state.iter().all(|v| v.is_finite()));
+        assert!((report.state[OMEGA_R] - y[0]).abs() < 0.05);
+    }
+}
