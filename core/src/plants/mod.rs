@@ -1,3 +1,4 @@
-//! Estimation models of the monitored systems.
+//! Estimation models of the plants the papers study.
 
 pub mod scooter;
+pub mod valve;
