@@ -41,12 +41,19 @@ pub struct AdaptiveConfig<T: Real, const NX: usize, const NY: usize> {
     pub q_ceiling: SVector<T, NX>,
     /// Diagonal floor of the matched `R`.
     pub r_floor: SVector<T, NY>,
+    /// Diagonal ceiling of the matched `R`: one sudden change in the window otherwise
+    /// inflates `R` by orders of magnitude and the filter stops listening to its sensors.
+    pub r_ceiling: SVector<T, NY>,
     /// Floor for repairing a state covariance that lost positive definiteness.
     pub p_floor: T,
     /// Which states the enhancement scales (1 = enhance, 0 = keep): their variances are
     /// multiplied by `tau` and their cross-covariances with the other states cleared. All
     /// ones is the paper's `P <- tau P` up to the cleared cross terms.
     pub enhance_mask: SVector<T, NX>,
+    /// Smallest variance of an enhanced state after enhancement (`max(tau P_ii, floor_i)`):
+    /// when the filter has grown very confident, `tau P` alone is too small to follow a
+    /// large step. Zero gives the paper's rule.
+    pub enhance_floor: SVector<T, NX>,
     /// Physical bounds of the state (e.g. a stiffness cannot be negative); an estimate
     /// outside is clamped and flagged [`Flags::BOUNDS_CLAMPED`].
     pub lower: SVector<T, NX>,
@@ -68,8 +75,10 @@ impl<T: Real, const NX: usize, const NY: usize> AdaptiveConfig<T, NX, NY> {
             q_floor,
             q_ceiling,
             r_floor,
+            r_ceiling: SVector::repeat(T::MAX_FINITE),
             p_floor: cast(1e-12),
             enhance_mask: SVector::repeat(T::one()),
+            enhance_floor: SVector::zeros(),
             lower: SVector::repeat(-T::MAX_FINITE),
             upper: SVector::repeat(T::MAX_FINITE),
         }
@@ -119,8 +128,13 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
             || !all_finite(config.q_floor.as_slice())
             || !all_finite(config.q_ceiling.as_slice())
             || !all_finite(config.r_floor.as_slice())
+            || config.r_ceiling.iter().any(|c| c.nan())
             || !(config.p_floor > T::zero())
             || !all_finite(config.enhance_mask.as_slice())
+            || config
+                .enhance_floor
+                .iter()
+                .any(|f| !(*f >= T::zero()) || !f.finite())
             || config
                 .lower
                 .iter()
@@ -211,8 +225,19 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
             // The enhanced states lose their cross-covariances: correlations learnt while the
             // parameter was constant would otherwise steer the sudden change into the
             // correlated states. A PD matrix stays PD when a row/column pair is decoupled.
-            for (i, m) in self.config.enhance_mask.iter().enumerate() {
+            for (i, (m, floor)) in self
+                .config
+                .enhance_mask
+                .iter()
+                .zip(self.config.enhance_floor.iter())
+                .enumerate()
+            {
                 if *m > T::zero() {
+                    if let Some(v) = p.get_mut((i, i))
+                        && *v < *floor
+                    {
+                        *v = *floor;
+                    }
                     for j in 0..NX {
                         if j != i {
                             if let Some(v) = p.get_mut((i, j)) {
@@ -262,7 +287,9 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
         if clamped != state && self.ukf.set_state(clamped).is_ok() {
             flags.insert(Flags::BOUNDS_CLAMPED);
         }
-        if update.fused {
+        // Innovations of a sample flagged as a sudden change are not noise: they stay out of
+        // the matching window.
+        if update.fused && !enhanced {
             let correction = self.ukf.state() - prior;
             if let (Some(e), Some(c)) = (
                 self.innovations.get_mut(self.head),
@@ -311,6 +338,14 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
         // R = C - (S - R_used), kept positive definite.
         let mut r = c - (s - self.r);
         symmetrise(&mut r);
+        let capped = r
+            .diagonal()
+            .zip_map(&self.config.r_ceiling, |v, cap| v.min(cap));
+        for (i, v) in capped.iter().enumerate() {
+            if let Some(entry) = r.get_mut((i, i)) {
+                *entry = *v;
+            }
+        }
         if floor_diagonal(&mut r, &self.config.r_floor) {
             flags.insert(Flags::VARIANCE_FLOOR);
         }
@@ -509,6 +544,24 @@ mod tests {
         assert!(second.flags.contains(Flags::CHOLESKY_REPAIRED));
         assert!(f.ukf().state().iter().all(|v| v.is_finite()));
         assert!(f.ukf().covariance().iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn enhancement_floor_and_window_exclusion() {
+        let mut f = filter(Adaptation::Enhanced, 1e-4);
+        f.config.enhance_mask = Vector2::new(0.0, 1.0);
+        f.config.enhance_floor = Vector2::new(0.0, 0.04);
+        let u = Vector1::new(0.0);
+        for _ in 0..30 {
+            f.step(&Gain, &u, &[1.0], 0.02, false).unwrap();
+        }
+        let filled = f.filled;
+        let report = f.step(&Gain, &u, &[0.7], 0.02, true).unwrap();
+        assert!(report.enhanced && report.flags.contains(Flags::COVARIANCE_ENHANCED));
+        // The floor (std 0.2) lets one sample carry most of the 0.3 step.
+        assert!(f.ukf().state()[1] < 0.75, "{}", f.ukf().state()[1]);
+        // The flagged sample stayed out of the matching window.
+        assert_eq!(f.filled, filled);
     }
 
     #[test]

@@ -60,6 +60,7 @@ impl<T: Real> ScooterConfig<T> {
             v([1e-6, 1e-6, 1e-8, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-9]),
             w([1e-8, 1e-10, 1e-8]),
         );
+        adaptive.enhance_floor = v([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0]);
         adaptive.enhance_mask = v([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
         adaptive.lower = v([-1e9, -1e9, -1e9, -1e9, -1e9, -1e9, 0.05, 0.0, 5.0]);
         adaptive.upper = v([1e9, 1e9, 1e9, 1e9, 1e9, 1e9, 1.5, 5.0, 20.0]);
