@@ -280,6 +280,15 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
             }
         };
         flags.insert(update.flags);
+        // The posterior `P - K S K^T` can lose definiteness by round-off (f32): repair now
+        // rather than let a negative variance reach the caller.
+        if Cholesky::new(*self.ukf.covariance()).is_none() {
+            if let Err(e) = self.repair_covariance() {
+                self.ukf = saved;
+                return Err(e);
+            }
+            flags.insert(Flags::CHOLESKY_REPAIRED);
+        }
         let state = *self.ukf.state();
         let clamped = state.zip_zip_map(&self.config.lower, &self.config.upper, |x, lo, hi| {
             x.max(lo).min(hi)

@@ -113,6 +113,9 @@ pub struct Scooter<T: Real> {
     prognoser: SequentialPrognoser<T>,
     time: T,
     last_y: Option<[T; 3]>,
+    /// The last sample rejected as a jump: a second sample agreeing with it is a real level
+    /// change (e.g. after a dropout), not a glitch, and is accepted.
+    jump_candidate: Option<[T; 3]>,
     last_u: Option<T>,
     inconsistent_run: u32,
     /// Time of the first sample of the current run of inconsistent samples.
@@ -146,6 +149,7 @@ impl<T: Real> Scooter<T> {
             config,
             time: t0,
             last_y: None,
+            jump_candidate: None,
             last_u: None,
             inconsistent_run: 0,
             run_start: t0,
@@ -164,9 +168,11 @@ impl<T: Real> Scooter<T> {
     }
 
     /// Processes the sample `y = [omega_r, v_m, omega_f]` taken at time `t`, with `u` the
-    /// motor-driver input held since the previous sample. On `Err` nothing changed: a
-    /// non-finite sample, a time that does not advance, or an encoder glitch (a value outside
-    /// `max_abs` or a jump larger than `max_jump`, reported as `OutOfRange`).
+    /// motor-driver input held since the previous sample. On `Err` the estimator is unchanged:
+    /// a non-finite sample, a time that does not advance, or an encoder glitch (a value
+    /// outside `max_abs`, or a jump larger than `max_jump` from the last accepted sample,
+    /// reported as `OutOfRange`). The glitch check remembers a rejected jump: when the next
+    /// sample agrees with it, the level change is real and the sample is accepted.
     pub fn step(&mut self, t: T, u: T, y: &[T]) -> Result<ScooterReport<T>, Error> {
         let dt = t - self.time;
         crate::error::check_dt(dt)?;
@@ -191,11 +197,19 @@ impl<T: Real> Scooter<T> {
                 return Err(Error::OutOfRange("measurement magnitude (encoder glitch)"));
             }
         }
-        if let Some(prev) = self.last_y {
-            for ((v, p), jump) in y3.iter().zip(prev.iter()).zip(self.config.max_jump.iter()) {
-                if (*v - *p).abs() > *jump {
-                    return Err(Error::OutOfRange("measurement jump (encoder glitch)"));
-                }
+        let within = |a: &[T; 3], b: &[T; 3]| {
+            a.iter()
+                .zip(b.iter())
+                .zip(self.config.max_jump.iter())
+                .all(|((x, y), jump)| (*x - *y).abs() <= *jump)
+        };
+        if let Some(prev) = self.last_y
+            && !within(&y3, &prev)
+        {
+            let confirmed = self.jump_candidate.is_some_and(|c| within(&y3, &c));
+            if !confirmed {
+                self.jump_candidate = Some(y3);
+                return Err(Error::OutOfRange("measurement jump (encoder glitch)"));
             }
         }
         let mut arr = self.arr.clone();
@@ -251,6 +265,7 @@ impl<T: Real> Scooter<T> {
         self.psi_above = fire;
         self.time = t;
         self.last_y = Some(y3);
+        self.jump_candidate = None;
         let mut event = None;
         let mut outcome = None;
         if let Some(prev_u) = self.last_u
@@ -394,5 +409,49 @@ mod tests {
         let report = pipe.step(t, 1.0, &y).unwrap();
         assert!(report.state.iter().all(|v| v.is_finite()));
         assert!((report.state[OMEGA_R] - y[0]).abs() < 0.05);
+    }
+
+    #[test]
+    fn hostile_input_never_panics_or_produces_nan_in_f32() {
+        use crate::random::uniform01;
+        use rand_core::SeedableRng;
+        use rand_xoshiro::Xoshiro256PlusPlus;
+        let ys = samples(400);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(21);
+        let mut pipe = Scooter::<f32>::new(0.0, ScooterConfig::new(Adaptation::Enhanced)).unwrap();
+        let mut t = 0.0f32;
+        let (mut accepted, mut rejected) = (0, 0);
+        for k in 0..3000 {
+            let clean = ys[k % 400];
+            let mut y = [clean[0] as f32, clean[1] as f32, clean[2] as f32];
+            let mut u = 1.0f32;
+            let mut dt = 0.02f32;
+            let pick: f32 = uniform01(&mut rng);
+            let channel = (uniform01::<f32, _>(&mut rng) * 3.0) as usize % 3;
+            match (pick * 10.0) as u32 {
+                0 => y[channel] = f32::NAN,
+                1 => y[channel] = f32::INFINITY,
+                2 => y[channel] += 3.0 * (uniform01::<f32, _>(&mut rng) - 0.5),
+                3 => u = 50.0 * (uniform01::<f32, _>(&mut rng) - 0.5),
+                4 => dt = if pick < 0.45 { 0.0 } else { -0.02 },
+                5 => y[channel] = 1e20,
+                _ => {}
+            }
+            let before = *pipe.filter().ukf().state();
+            match pipe.step(t + dt, u, &y) {
+                Ok(report) => {
+                    accepted += 1;
+                    t += dt;
+                    assert!(report.state.iter().all(|v| v.is_finite()), "{report:?}");
+                    assert!(report.beta_variance.is_finite() && report.beta_variance >= 0.0);
+                    assert!(report.arr.psi.is_finite());
+                }
+                Err(_) => {
+                    rejected += 1;
+                    assert_eq!(before, *pipe.filter().ukf().state());
+                }
+            }
+        }
+        assert!(accepted > 1500 && rejected > 300, "{accepted} {rejected}");
     }
 }
