@@ -3,8 +3,10 @@
 //! sequential prognoser of the intermittent `beta_theta_r` fault, behind one
 //! [`Scooter::step`] call at 50 Hz.
 //!
-//! Size: dominated by the UKF (9 states, 19 sigma points) and the matching window; about
-//! 4 kB in f32.
+//! Size: 4096 bytes in f32 (8128 in f64), dominated by the UKF (9 states, 19 sigma points)
+//! and the 25-sample matching window; a step also holds two copies of the filter on the stack
+//! (so that an error leaves the pipeline unchanged): keep the pipeline in a `static` and give
+//! the stack about 12 kB.
 
 use crate::diagnose::scooter::{ArrReport, FaultSet, ScooterArr, suspected_faults};
 use crate::error::Error;
@@ -409,6 +411,13 @@ mod tests {
         let report = pipe.step(t, 1.0, &y).unwrap();
         assert!(report.state.iter().all(|v| v.is_finite()));
         assert!((report.state[OMEGA_R] - y[0]).abs() < 0.05);
+    }
+
+    #[test]
+    fn documented_size_holds() {
+        let size = core::mem::size_of::<Scooter<f32>>();
+        assert!(size <= 4200, "{size}");
+        assert!(core::mem::size_of::<Scooter<f64>>() <= 8300);
     }
 
     #[test]
