@@ -187,8 +187,10 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
     /// One predict-update cycle over `dt` with input `u` and measurement `y`; when `enhance`
     /// (the auxiliary detector fired on `y`) and the mode is [`Adaptation::Enhanced`], the
     /// previous posterior covariance is multiplied by `tau` before the cycle. Errors leave the filter unchanged, except that a
-    /// covariance found not positive definite is repaired once (flagged
-    /// [`Flags::CHOLESKY_REPAIRED`]) before the step is retried.
+    /// covariance found not positive definite is repaired (flagged
+    /// [`Flags::CHOLESKY_REPAIRED`]): before the prediction by flooring the posterior's
+    /// diagonal and loading `Q` for that prediction; in the update by keeping the prior
+    /// (a predict-only step, also flagged [`Flags::MEASUREMENT_REJECTED`]).
     pub fn step<M, const NU: usize>(
         &mut self,
         model: &M,
@@ -257,9 +259,19 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
         }
         let predicted = match self.ukf.predict(model, u, dt) {
             Err(Error::NotPositiveDefinite) => {
+                // Repair the posterior and load Q's diagonal for this one prediction, so that
+                // a prior that collapsed (e.g. Q = 0 and a contracting model) is PD again.
                 self.repair_covariance()?;
                 flags.insert(Flags::CHOLESKY_REPAIRED);
-                self.ukf.predict(model, u, dt)
+                let q = *self.ukf.process_noise();
+                let loading = SMatrix::<T, NX, NX>::identity() * self.config.p_floor;
+                let retried = self
+                    .ukf
+                    .set_process_noise(q + loading)
+                    .and_then(|()| self.ukf.predict(model, u, dt));
+                // Restoring a Q that was accepted before cannot fail.
+                let _ = self.ukf.set_process_noise(q);
+                retried
             }
             other => other,
         };
@@ -274,21 +286,26 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
         let prior = *self.ukf.state();
         let update = match self.ukf.update(model, u, y, &self.r) {
             Ok(rep) => rep,
+            // S or the posterior is not positive definite: the UKF kept the prior. Repair:
+            // this step is predict-only (flagged), rather than an error that loses the
+            // prediction.
+            Err(Error::NotPositiveDefinite) => {
+                flags.insert(Flags::CHOLESKY_REPAIRED);
+                flags.insert(Flags::MEASUREMENT_REJECTED);
+                UkfReport {
+                    innovation: SVector::zeros(),
+                    innovation_cov: self.r,
+                    nis: T::zero(),
+                    fused: false,
+                    flags: Flags::MEASUREMENT_REJECTED,
+                }
+            }
             Err(e) => {
                 self.ukf = saved;
                 return Err(e);
             }
         };
         flags.insert(update.flags);
-        // The posterior `P - K S K^T` can lose definiteness by round-off (f32): repair now
-        // rather than let a negative variance reach the caller.
-        if Cholesky::new(*self.ukf.covariance()).is_none() {
-            if let Err(e) = self.repair_covariance() {
-                self.ukf = saved;
-                return Err(e);
-            }
-            flags.insert(Flags::CHOLESKY_REPAIRED);
-        }
         let state = *self.ukf.state();
         let clamped = state.zip_zip_map(&self.config.lower, &self.config.upper, |x, lo, hi| {
             x.max(lo).min(hi)
@@ -546,11 +563,12 @@ mod tests {
         let mut f: AdaptiveUkf<f64, 2, 5, 1, 4> =
             AdaptiveUkf::new(ukf, Matrix1::new(1e-2), config).unwrap();
         let u = Vector1::new(0.0);
-        let first = f.step(&Collapse, &u, &[1.0], 0.02, false).unwrap();
-        assert!(!first.flags.contains(Flags::CHOLESKY_REPAIRED));
-        // P is now zero: the next prediction cannot factor it.
-        let second = f.step(&Collapse, &u, &[1.0], 0.02, false).unwrap();
-        assert!(second.flags.contains(Flags::CHOLESKY_REPAIRED));
+        // The model collapses every sigma point and Q = 0: the prior is singular at once.
+        for _ in 0..3 {
+            let report = f.step(&Collapse, &u, &[1.0], 0.02, false).unwrap();
+            assert!(report.flags.contains(Flags::CHOLESKY_REPAIRED));
+            assert!(f.ukf().covariance().diagonal().iter().all(|v| *v > 0.0));
+        }
         assert!(f.ukf().state().iter().all(|v| v.is_finite()));
         assert!(f.ukf().covariance().iter().all(|v| v.is_finite()));
     }
