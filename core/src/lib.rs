@@ -20,6 +20,7 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod diagnose;
 pub mod error;
 pub mod filter;
 pub mod health;

@@ -20,5 +20,6 @@ pub mod plot;
 pub mod reaction_wheel;
 pub mod registry;
 pub mod scenario;
+pub mod scooter;
 
 pub use error::SimError;

@@ -2,5 +2,7 @@
 
 pub mod edge;
 pub mod reaction_wheel;
+pub mod scooter;
 
 pub use reaction_wheel::ReactionWheel;
+pub use scooter::Scooter;

@@ -1,4 +1,5 @@
 //! Estimation models of the plants the papers study.
 
+pub mod scooter;
 pub mod valve;
 pub mod reaction_wheel;

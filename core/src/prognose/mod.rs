@@ -1,5 +1,6 @@
 //! Prognosis: end-of-life and remaining-useful-life prediction.
 
 pub mod eol;
+pub mod sequential;
 
 pub use eol::{EndOfLife, PredictionSettings, predict_eol, rul_distribution};

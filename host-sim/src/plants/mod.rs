@@ -1,1 +1,4 @@
+//! Simulated truth plants.
+
 pub mod reaction_wheel;
+pub mod scooter;

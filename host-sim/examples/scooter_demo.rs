@@ -1,0 +1,1 @@
+fn main() { print!("{}", prognos_sim::scooter::demo_summary(1)); }
