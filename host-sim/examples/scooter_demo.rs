@@ -1,1 +1,3 @@
-fn main() { print!("{}", prognos_sim::scooter::demo_summary(1)); }
+fn main() {
+    print!("{}", prognos_sim::scooter::demo_summary(1));
+}

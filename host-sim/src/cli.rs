@@ -92,11 +92,44 @@ pub enum Command {
     },
     /// List the registered systems.
     Systems,
+    /// Regenerate a paper's result table (printed beside the paper's numbers).
+    Reproduce {
+        /// Which table.
+        #[arg(value_enum)]
+        table: crate::reproduce::Table,
+        /// Monte-Carlo runs [default: 20].
+        #[arg(long)]
+        runs: Option<usize>,
+        /// Base seed.
+        #[arg(long, default_value_t = 1000)]
+        seed: u64,
+        /// Also write the text to this file (atomically).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Edge-cloud prognosis (AR model-of-signals on the edge, particle filter in the cloud)
+    /// of one bearing vibration file (PRONOSTIA format, see data/pronostia/README.md).
+    EdgeCloud {
+        /// Bearing vibration CSV.
+        #[arg(long)]
+        bearing_csv: PathBuf,
+        /// Configuration TOML (thresholds, output folder); defaults are the tuned values.
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
 }
 
 /// Parses the process arguments, runs the command, prints any error, returns the status.
 pub fn main_with(registry: Registry) -> ExitCode {
     let cli = Cli::parse();
+    if let Command::EdgeCloud {
+        bearing_csv,
+        config,
+    } = &cli.command
+    {
+        let status = crate::edge_cloud::cli_edge_cloud(bearing_csv, config.as_deref());
+        return ExitCode::from(u8::try_from(status).unwrap_or(1));
+    }
     match execute(&registry, cli.command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -252,6 +285,23 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             );
             Ok(())
         }
+        Command::Reproduce {
+            table,
+            runs,
+            seed,
+            out,
+        } => {
+            let text =
+                crate::reproduce::reproduce(table, runs.unwrap_or(table.default_runs()), seed);
+            print!("{text}");
+            if let Some(path) = out {
+                crate::output::write_text(&path, &text)?;
+            }
+            Ok(())
+        }
+        Command::EdgeCloud { .. } => Err(SimError::Run(
+            "edge-cloud is handled before dispatch".into(),
+        )),
     }
 }
 
@@ -262,8 +312,10 @@ pub fn demo(
     only: Option<&str>,
     plots: bool,
 ) -> Result<(), SimError> {
+    let paper_systems = ["reaction_wheel", "scooter"];
     if let Some(name) = only
         && registry.get(name).is_none()
+        && !paper_systems.contains(&name)
     {
         return Err(SimError::Run(format!("unknown system `{name}`")));
     }
@@ -288,17 +340,22 @@ pub fn demo(
         )?;
         results.push((system.name(), metrics, elapsed, files));
     }
-    if results.is_empty() {
-        return Err(SimError::Run(
-            "no registered system has a demo scenario".into(),
-        ));
+    let paper = crate::reproduce::paper_demos(out, only)?;
+    if results.is_empty() && paper.is_empty() {
+        return Err(SimError::Run("no system has a demo".into()));
     }
-    let rows: Vec<(&str, &RunMetrics, f64)> =
-        results.iter().map(|(n, m, e, _)| (*n, m, *e)).collect();
-    print!("{}", metrics_table(&rows));
-    for (_, _, _, files) in &results {
-        print_files(&files.csv, &files.json, &files.plots);
+    if !results.is_empty() {
+        let rows: Vec<(&str, &RunMetrics, f64)> =
+            results.iter().map(|(n, m, e, _)| (*n, m, *e)).collect();
+        print!("{}", metrics_table(&rows));
+        for (_, _, _, files) in &results {
+            print_files(&files.csv, &files.json, &files.plots);
+        }
     }
+    for text in &paper {
+        println!("\n{text}");
+    }
+    println!("wrote {}", out.display());
     Ok(())
 }
 

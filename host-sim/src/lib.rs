@@ -19,6 +19,7 @@ pub mod plants;
 pub mod plot;
 pub mod reaction_wheel;
 pub mod registry;
+pub mod reproduce;
 pub mod scenario;
 pub mod scooter;
 

@@ -1,5 +1,5 @@
 //! Estimation models of the plants the papers study.
 
+pub mod reaction_wheel;
 pub mod scooter;
 pub mod valve;
-pub mod reaction_wheel;
