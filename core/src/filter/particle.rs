@@ -442,6 +442,31 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
         flags
     }
 
+    /// Replaces each particle's normalised log-weight by `f(particle, log_weight)` and
+    /// renormalises (for weight mutations such as `filter::adaptive`'s sample improvement).
+    /// If no new weight is positive and finite the weights stay unchanged and `false` is
+    /// returned. NaN results count as zero weight.
+    pub fn reweight(&mut self, mut f: impl FnMut(&SVector<T, NX>, T) -> T) -> bool {
+        let neg_inf = T::min_value().unwrap_or(-T::MAX_FINITE);
+        for ((s, p), lw) in self
+            .scratch
+            .iter_mut()
+            .zip(self.particles.iter())
+            .zip(self.log_weights.iter())
+        {
+            let v = f(p, *lw);
+            *s = if v.nan() { neg_inf } else { v };
+        }
+        let total = log_sum_exp(&self.scratch);
+        if !total.finite() {
+            return false;
+        }
+        for (lw, s) in self.log_weights.iter_mut().zip(self.scratch.iter()) {
+            *lw = *s - total;
+        }
+        true
+    }
+
     /// Roughening: Gaussian jitter proportional to each entry's particle range.
     fn roughen<R: Rng + ?Sized>(&mut self, rng: &mut R) -> bool {
         if self.config.roughening.iter().all(|k| *k == T::zero()) {

@@ -1,3 +1,6 @@
-//! Complete on-board prognosers that compose the core pieces for one system.
+//! Complete on-board prognosers, one `step(t, u, y)` call per sample.
 
 pub mod edge;
+pub mod reaction_wheel;
+
+pub use reaction_wheel::ReactionWheel;
