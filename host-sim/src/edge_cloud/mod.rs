@@ -69,8 +69,9 @@ pub enum Channel {
 }
 
 /// Settings of the whole method (a TOML file with any subset of these keys). Defaults are the
-/// paper's values where it gives them and the values tuned on the six learning bearings
-/// otherwise (see `docs/deviations.md`).
+/// paper's values, except the thresholds `prog_threshold`, `diff_threshold`, `eol_threshold`
+/// and `nrmse_alarm`, the HI noise and `use_noise_variance`, which were set once for all six
+/// learning bearings (see `docs/deviations.md`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct EdgeCloudConfig {
@@ -84,7 +85,7 @@ pub struct EdgeCloudConfig {
     pub warmup_models: usize,
     /// Models averaged into the reference.
     pub reference_models: usize,
-    /// Backup alarm threshold on HI_NRMSE.
+    /// Backup alarm threshold on HI_NRMSE (paper range [1, 1.1], default 1.1).
     pub nrmse_alarm: f64,
     /// Frequency grid of the Itakura-Saito integral.
     pub spectrum_points: usize,
@@ -93,11 +94,12 @@ pub struct EdgeCloudConfig {
     pub use_noise_variance: bool,
     /// Trailing-mean window of the HI (12 in the paper).
     pub smoothing_window: usize,
-    /// `T_prog`: prognosis starts when the smoothed HI reaches it.
+    /// `T_prog`: prognosis starts when the smoothed HI reaches it (paper 0.1, default 0.5).
     pub prog_threshold: f64,
-    /// `T_diff`: a first difference above it switches to the polynomial stage.
+    /// `T_diff`: a first difference of the smoothed HI above it switches to the polynomial
+    /// stage (paper 0.2, default 0.1).
     pub diff_threshold: f64,
-    /// `T_EoL`: the HI level that defines the predicted end of life.
+    /// `T_EoL`: the HI level that defines the predicted end of life (paper 10, default 50).
     pub eol_threshold: f64,
     /// Random-walk variance of `b` per step, 1/min^2 (1e-5 in the paper).
     pub b_walk_var: f64,
