@@ -1,42 +1,34 @@
-//! Model mismatch between the truth plant (2 ms) and the filter model (10 ms, fast-forward).
-use prognos_core::plants::valve::SensorNoise;
-use prognos_sim::valve::{SAMPLE_DT, SAMPLES_PER_CYCLE, TruthValve, ValveSetup, cycle_input};
+//! Cycle timing of the filter model (10 ms) against the truth plant (2 ms) at several
+//! bottom-leak sizes: the discretisation bias the filter sees through the timing.
+use prognos_core::plants::valve::{Requirements, ValveParams, simulate_cycle};
 fn main() {
-    let setup = ValveSetup::new();
-    let p = setup.params;
-    for wear in [
-        [0.0; 5],
-        [0.0, 0.0, 0.0, 0.0, 3.7e-9],
-        [0.0, 0.0, 0.0, 0.0, 1e-8],
-    ] {
-        let mut truth = TruthValve::new(wear, SensorNoise::default());
-        let mut s = p.nominal_state(6000.0, 48000.0, wear);
-        let mut worst = [0.0f64; 4];
-        let t0 = std::time::Instant::now();
-        let mut quiet = 0;
-        for _cycle in 0..30 {
-            for k in 0..SAMPLES_PER_CYCLE {
-                let u = cycle_input(&p, k);
-                if p.is_quiescent(&s, &u) {
-                    quiet += 1;
-                }
-                s = p.advance(&s, &u, SAMPLE_DT);
-                truth.advance(&u, SAMPLE_DT);
-                let a = p.outputs(&s, &u);
-                let b = truth.params.outputs(&truth.state, &u);
-                for (w, i) in worst.iter_mut().zip([0, 1, 2, 3]) {
-                    *w = w.max((a[i] - b[i]).abs());
-                }
-            }
+    let model = ValveParams::<f64>::progpy_stable();
+    let truth = ValveParams {
+        max_substep: 0.002,
+        ..model
+    };
+    let reqs = [
+        Requirements {
+            dt: 0.01,
+            ..Requirements::default()
+        },
+        Requirements {
+            dt: 0.002,
+            ..Requirements::default()
+        },
+    ];
+    for a in [0.0, 2e-6, 4e-6, 6e-6, 8e-6, 1e-5, 1.1e-5] {
+        let mut row = String::new();
+        for (p, req) in [&model, &truth].into_iter().zip(&reqs) {
+            let mut s = p.nominal_state(6000.0, 48000.0, [0.0; 5]);
+            s[8] = a;
+            let (_, s1) = simulate_cycle(p, req, &s);
+            let (t, _) = simulate_cycle(p, req, &s1);
+            row.push_str(&format!(
+                "  open {:.3} (1: {:.3}) close {:.3}",
+                t.t_open, t.t_open1, t.t_close
+            ));
         }
-        println!(
-            "{wear:?}: max |dx| {:.2e} |dpt| {:.0} |dpb| {:.0} |df| {:.2e}; quiescent {:.0}%, {:.3} ms per cycle (model + truth)",
-            worst[0],
-            worst[1],
-            worst[2],
-            worst[3],
-            quiet as f64 / 90.0,
-            t0.elapsed().as_secs_f64() * 1000.0 / 30.0
-        );
+        println!("A_eb {a:.1e}: model{row}");
     }
 }

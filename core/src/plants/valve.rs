@@ -708,6 +708,13 @@ pub struct ProcessNoise<T> {
     pub v: T,
     /// Gas masses, relative [1 per sqrt(s)].
     pub mass_rel: T,
+    /// Multiplicative noise on each step's damage increment of the sliding modes (friction,
+    /// spring, internal leak): the increment is scaled by `1 + sliding_rel * N(0, 1)`.
+    /// Proportional to the particle's own progression, so a mode a particle believes
+    /// inactive stays put.
+    pub sliding_rel: T,
+    /// The same for the time-driven external leaks.
+    pub leak_rel: T,
 }
 
 impl<T: Real> Default for ProcessNoise<T> {
@@ -715,6 +722,8 @@ impl<T: Real> Default for ProcessNoise<T> {
         Self {
             v: T::zero(),
             mass_rel: T::zero(),
+            sliding_rel: T::zero(),
+            leak_rel: T::zero(),
         }
     }
 }
@@ -786,6 +795,26 @@ impl<T: Real> Stochastic<T, NX, NU> for Valve<T> {
     ) -> SVector<T, NX> {
         let mut next = self.params.advance(x, u, dt);
         let pn = self.process_noise;
+        if pn.sliding_rel > T::zero() || pn.leak_rel > T::zero() {
+            for (mode, rel) in [
+                (DamageMode::Friction, pn.sliding_rel),
+                (DamageMode::Spring, pn.sliding_rel),
+                (DamageMode::InternalLeak, pn.sliding_rel),
+                (DamageMode::TopLeak, pn.leak_rel),
+                (DamageMode::BottomLeak, pn.leak_rel),
+            ] {
+                let i = mode.damage_index();
+                let before = x.get(i).copied().unwrap_or_else(T::zero);
+                if let Some(d) = next.get_mut(i) {
+                    let increment = *d - before;
+                    if increment != T::zero() && rel > T::zero() {
+                        let moved =
+                            *d + increment * rel * crate::random::standard_normal::<T, R>(rng);
+                        *d = if moved > T::zero() { moved } else { T::zero() };
+                    }
+                }
+            }
+        }
         if pn.v > T::zero() || pn.mass_rel > T::zero() {
             let sq = dt.sqrt();
             let dv = crate::random::standard_normal::<T, R>(rng) * pn.v * sq;
