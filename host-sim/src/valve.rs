@@ -91,7 +91,7 @@ impl ValveSetup {
     /// progpy constants, semi-implicit at 0.01 s, quiescent fast-forward, recorded thresholds.
     pub fn new() -> Self {
         let params = ValveParams {
-            quiescent_rate_tol: 2000.0,
+            quiescent_rate_tol: 500.0,
             ..ValveParams::progpy_stable()
         };
         let requirements = Requirements::default();

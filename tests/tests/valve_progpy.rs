@@ -280,7 +280,7 @@ fn recorded_damage_thresholds_match_recomputation() {
 fn quiescent_fast_forward_keeps_cycle_timing() {
     let exact = ValveParams::<f64>::progpy_stable();
     let fast = ValveParams {
-        quiescent_rate_tol: 2000.0,
+        quiescent_rate_tol: 500.0,
         ..exact
     };
     let (a, b) = (bottom_leak_cycles(&exact), bottom_leak_cycles(&fast));
