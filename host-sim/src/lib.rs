@@ -22,5 +22,6 @@ pub mod registry;
 pub mod reproduce;
 pub mod scenario;
 pub mod scooter;
+pub mod valve;
 
 pub use error::SimError;

@@ -275,3 +275,24 @@ fn recorded_damage_thresholds_match_recomputation() {
     // cycle (1.14e-5 m^2 at cycle 38) is just above it, the one before (1.11e-5) below.
     assert!(t.a_eb_max > 1.11e-5 && t.a_eb_max < 1.14e-5);
 }
+
+#[test]
+fn quiescent_fast_forward_keeps_cycle_timing() {
+    let exact = ValveParams::<f64>::progpy_stable();
+    let fast = ValveParams {
+        quiescent_rate_tol: 500.0,
+        ..exact
+    };
+    let (a, b) = (bottom_leak_cycles(&exact), bottom_leak_cycles(&fast));
+    assert_eq!(a.len(), b.len());
+    for (c, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(
+            (x.t_open - y.t_open).abs() <= 0.0101,
+            "cycle {c}: {x:?} vs {y:?}"
+        );
+        assert!(
+            (x.t_close - y.t_close).abs() <= 0.0101,
+            "cycle {c}: {x:?} vs {y:?}"
+        );
+    }
+}

@@ -211,6 +211,11 @@ pub struct ValveParams<T> {
     pub integrator: Integrator,
     /// Largest internal step [s]; [`Model::step`] sub-steps a longer `dt`.
     pub max_substep: T,
+    /// Pressure drift [Pa/s] of either chamber below which a valve resting at a hard stop
+    /// counts as quiescent and is fast-forwarded; zero disables the shortcut (all presets).
+    /// The drift is the mean of the rates at the state and one sub-step later, because
+    /// explicit Euler chatters (period two, about 1.4 kPa) around a settled pressure.
+    pub quiescent_rate_tol: T,
 }
 
 impl<T: Real> ValveParams<T> {
@@ -241,6 +246,7 @@ impl<T: Real> ValveParams<T> {
             indicator_tolerance: T::zero(),
             integrator: Integrator::SemiImplicit,
             max_substep: cast(0.01),
+            quiescent_rate_tol: T::zero(),
         }
     }
 
@@ -272,6 +278,7 @@ impl<T: Real> ValveParams<T> {
             indicator_tolerance: cast(1.0e-3),
             integrator: Integrator::ProgpyEuler,
             max_substep: cast(0.01),
+            quiescent_rate_tol: T::zero(),
         }
     }
 
@@ -306,35 +313,24 @@ impl<T: Real> ValveParams<T> {
         p * (self.v_b0 + self.a_p * x) / (self.r_gas * self.temperature)
     }
 
-    /// Mass flow [kg/s] from pressure `p1` to `p2` through an orifice of area `area` and
-    /// discharge coefficient `c` (the paper's f_g: choked and non-choked, either direction).
-    pub fn gas_flow(&self, p1: T, p2: T, c: T, area: T) -> T {
-        if area <= T::zero() || !(p1 > T::zero() || p2 > T::zero()) {
-            return T::zero();
-        }
-        let (up, down, sign) = if p1 >= p2 {
-            (p1, p2, T::one())
-        } else {
-            (p2, p1, -T::one())
-        };
+    /// The gas-only constants of the orifice equation.
+    pub fn gas_coefficients(&self) -> GasCoefficients<T> {
         let g = self.gamma;
         let one = T::one();
         let two: T = cast(2.0);
         let zrt = self.z * self.r_gas * self.temperature;
-        let choke_ratio = ((g + one) / two).powf(g / (g - one));
-        let flow = if up >= choke_ratio * down {
-            c * area * up * (g / zrt * (two / (g + one)).powf((g + one) / (g - one))).sqrt()
-        } else {
-            let ratio = down / up;
-            let bracket = ratio.powf(two / g) - ratio.powf((g + one) / g);
-            let bracket = if bracket > T::zero() {
-                bracket
-            } else {
-                T::zero()
-            };
-            c * area * up * (two * g / (zrt * (g - one)) * bracket).sqrt()
-        };
-        sign * flow
+        GasCoefficients {
+            choke_ratio: ((g + one) / two).powf(g / (g - one)),
+            choked: (g / zrt * (two / (g + one)).powf((g + one) / (g - one))).sqrt(),
+            subsonic: two * g / (zrt * (g - one)),
+            inv_gamma: one / g,
+        }
+    }
+
+    /// Mass flow [kg/s] from pressure `p1` to `p2` through an orifice of area `area` and
+    /// discharge coefficient `c` (the paper's f_g: choked and non-choked, either direction).
+    pub fn gas_flow(&self, p1: T, p2: T, c: T, area: T) -> T {
+        gas_flow_with(&self.gas_coefficients(), p1, p2, c, area)
     }
 
     /// Volumetric fluid flow through the valve [m^3/s] (linear characteristic).
@@ -385,8 +381,42 @@ impl<T: Real> ValveParams<T> {
         ])
     }
 
+    /// Mass-flow rates and forces at state `s` under input `u`.
+    fn rates(&self, gc: &GasCoefficients<T>, s: &SVector<T, NX>, u: &SVector<T, NU>) -> Rates<T> {
+        let [[x, _, m_t, m_b, _, k, a_i, a_et, a_eb, ..]] = s.data.0;
+        let [[p_l, p_r, u_t, u_b]] = u.data.0;
+        let p_t = self.pressure_top(x, m_t);
+        let p_b = self.pressure_bottom(x, m_b);
+        // Gas flows (positive into the chamber; internal leak positive top -> bottom).
+        let supply_top = gas_flow_with(gc, u_t, p_t, self.c_s, self.a_s);
+        let supply_bot = gas_flow_with(gc, u_b, p_b, self.c_s, self.a_s);
+        let leak_internal = gas_flow_with(gc, p_t, p_b, self.c_leak, a_i);
+        let leak_top = gas_flow_with(gc, p_t, self.p_atm, self.c_leak, a_et);
+        let leak_bot = gas_flow_with(gc, p_b, self.p_atm, self.c_leak, a_eb);
+        let spring = k * (x + self.x_o);
+        Rates {
+            dm_t: supply_top - leak_internal - leak_top,
+            dm_b: supply_bot + leak_internal - leak_bot,
+            spring,
+            // All forces except friction and contact.
+            force: (p_b - p_t) * self.a_p + (p_r - p_l) * self.a_v - self.m * self.g - spring,
+        }
+    }
+
     /// One internal step of length `h` (no sub-stepping).
     pub fn substep(&self, s: &SVector<T, NX>, u: &SVector<T, NU>, h: T) -> SVector<T, NX> {
+        self.substep_with(&self.gas_coefficients(), s, u, h).0
+    }
+
+    /// One step of length `h`; also returns the friction power |F_f v| and the spring power
+    /// |F_s v| that drove the damage in this step.
+    fn substep_with(
+        &self,
+        gc: &GasCoefficients<T>,
+        s: &SVector<T, NX>,
+        u: &SVector<T, NU>,
+        h: T,
+    ) -> (SVector<T, NX>, T, T) {
         let [
             [
                 x,
@@ -405,23 +435,13 @@ impl<T: Real> ValveParams<T> {
                 w_eb,
             ],
         ] = s.data.0;
-        let [[p_l, p_r, u_t, u_b]] = u.data.0;
         let zero = T::zero();
-        let p_t = self.pressure_top(x, m_t);
-        let p_b = self.pressure_bottom(x, m_b);
-
-        // Gas flows (positive into the chamber; internal leak positive top -> bottom).
-        let supply_top = self.gas_flow(u_t, p_t, self.c_s, self.a_s);
-        let supply_bot = self.gas_flow(u_b, p_b, self.c_s, self.a_s);
-        let leak_internal = self.gas_flow(p_t, p_b, self.c_leak, a_i);
-        let leak_top = self.gas_flow(p_t, self.p_atm, self.c_leak, a_et);
-        let leak_bot = self.gas_flow(p_b, self.p_atm, self.c_leak, a_eb);
-        let dm_t = supply_top - leak_internal - leak_top;
-        let dm_b = supply_bot + leak_internal - leak_bot;
-
-        let spring = k * (x + self.x_o);
-        // All forces except friction and contact.
-        let force = (p_b - p_t) * self.a_p + (p_r - p_l) * self.a_v - self.m * self.g - spring;
+        let Rates {
+            dm_t,
+            dm_b,
+            spring,
+            force,
+        } = self.rates(gc, s, u);
 
         let (x_new, v_new, v_wear) = match self.integrator {
             Integrator::ProgpyEuler => {
@@ -474,7 +494,7 @@ impl<T: Real> ValveParams<T> {
         let friction_power = (r * v_wear * v_wear).abs();
         let spring_power = (spring * v_wear).abs();
         let clamp0 = |a: T| if a > zero { a } else { zero };
-        SVector::from([
+        let next = SVector::from([
             x_new,
             v_new,
             clamp0(m_t + dm_t * h),
@@ -489,47 +509,100 @@ impl<T: Real> ValveParams<T> {
             w_i,
             w_et,
             w_eb,
-        ])
+        ]);
+        (next, friction_power, spring_power)
     }
 
-    /// Advances `dt` in equal sub-steps no longer than `max_substep`.
+    /// Advances `dt` in equal sub-steps no longer than `max_substep`. With a positive
+    /// `quiescent_rate_tol` a quiescent state (see [`ValveParams::is_quiescent`]) is
+    /// fast-forwarded: only the time-driven external leaks grow.
     pub fn advance(&self, s: &SVector<T, NX>, u: &SVector<T, NU>, dt: T) -> SVector<T, NX> {
-        let n = substep_count(dt, self.max_substep);
-        let h = dt / cast::<T>(f64::from(n));
-        let mut state = *s;
-        for _ in 0..n {
-            state = self.substep(&state, u, h);
-        }
-        state
+        self.advance_with_work(s, u, dt).0
     }
 
-    /// Advances `dt` exactly when the valve rests at a stop and both chambers have settled
-    /// at their port pressures with no leak: only the time-driven external-leak damage moves
-    /// then. Returns `None` when the state is not quiescent (the caller must integrate).
-    pub fn advance_quiescent(
+    /// [`ValveParams::advance`] that also returns the sliding work `[friction, spring]` [J]
+    /// done over `dt` (the integrals of |F_f v| and |F_s v| that drive damage).
+    pub fn advance_with_work(
         &self,
         s: &SVector<T, NX>,
         u: &SVector<T, NU>,
         dt: T,
-    ) -> Option<SVector<T, NX>> {
-        let [[x, v, m_t, m_b, _, _, a_i, a_et, a_eb, _, _, _, w_et, w_eb]] = s.data.0;
-        let [[_, _, u_t, u_b]] = u.data.0;
+    ) -> (SVector<T, NX>, [T; 2]) {
+        let gc = self.gas_coefficients();
+        if self.quiescent_rate_tol > T::zero() && self.quiescent_with(&gc, s, u) {
+            return (self.fast_forward(s, dt), [T::zero(); 2]);
+        }
+        let n = substep_count(dt, self.max_substep);
+        let h = dt / cast::<T>(f64::from(n));
+        let mut state = *s;
+        let mut work = [T::zero(); 2];
+        for _ in 0..n {
+            let (next, friction_power, spring_power) = self.substep_with(&gc, &state, u, h);
+            state = next;
+            let [wf, ws] = work;
+            work = [wf + friction_power * h, ws + spring_power * h];
+        }
+        (state, work)
+    }
+
+    /// True when the valve rests at a hard stop with the net force holding it there and both
+    /// chamber pressures drift by less than `quiescent_rate_tol` [Pa/s]: then
+    /// nothing but the time-driven leak areas changes appreciably until the next command.
+    pub fn is_quiescent(&self, s: &SVector<T, NX>, u: &SVector<T, NU>) -> bool {
+        self.quiescent_with(&self.gas_coefficients(), s, u)
+    }
+
+    fn quiescent_with(
+        &self,
+        gc: &GasCoefficients<T>,
+        s: &SVector<T, NX>,
+        u: &SVector<T, NU>,
+    ) -> bool {
+        if self.contact != Contact::HardStops {
+            return false;
+        }
+        let [[x, v, ..]] = s.data.0;
         let zero = T::zero();
-        let at_stop = x == zero || x == self.l_s;
-        if !at_stop || v != zero || a_i > zero || a_et > zero || a_eb > zero {
-            return None;
+        if v != zero || !(x == zero || x == self.l_s) {
+            return false;
         }
-        if w_et != zero || w_eb != zero {
-            return None;
+        let r0 = self.rates(gc, s, u);
+        let held = (x == zero && r0.force <= zero) || (x == self.l_s && r0.force >= zero);
+        if !held {
+            return false;
         }
-        let tol: T = cast(1e-6);
-        let p_t = self.pressure_top(x, m_t);
-        let p_b = self.pressure_bottom(x, m_b);
-        if ((p_t - u_t) / u_t).abs() > tol || ((p_b - u_b) / u_b).abs() > tol {
-            return None;
+        // Explicit Euler chatters around a settled pressure with period two: average the
+        // pressure rates at this state and one sub-step later to see the drift beneath.
+        // The valve is held, so one sub-step moves only the gas masses.
+        let mut s1 = *s;
+        let h = self.max_substep;
+        if let Some(m) = s1.get_mut(idx::M_TOP) {
+            *m += r0.dm_t * h;
         }
-        let _ = dt;
-        Some(*s)
+        if let Some(m) = s1.get_mut(idx::M_BOT) {
+            *m += r0.dm_b * h;
+        }
+        let r1 = self.rates(gc, &s1, u);
+        let half: T = cast(0.5);
+        let rt = self.r_gas * self.temperature;
+        let drift_t =
+            ((r0.dm_t + r1.dm_t) * half * rt / (self.v_t0 + self.a_p * (self.l_s - x))).abs();
+        let drift_b = ((r0.dm_b + r1.dm_b) * half * rt / (self.v_b0 + self.a_p * x)).abs();
+        let tol = self.quiescent_rate_tol;
+        drift_t <= tol && drift_b <= tol
+    }
+
+    /// The state after `dt` of quiescence: external leaks grow, nothing else moves.
+    fn fast_forward(&self, s: &SVector<T, NX>, dt: T) -> SVector<T, NX> {
+        let mut next = *s;
+        let [[.., w_et, w_eb]] = s.data.0;
+        if let Some(a) = next.get_mut(idx::A_ET) {
+            *a += w_et * dt;
+        }
+        if let Some(a) = next.get_mut(idx::A_EB) {
+            *a += w_eb * dt;
+        }
+        next
     }
 
     /// Noise-free measurements `[x, p_t, p_b, f_v, open, closed]` of state `s` under `u`.
@@ -555,6 +628,54 @@ impl<T: Real> ValveParams<T> {
             closed,
         ]
     }
+}
+
+/// Gas-only constants of the orifice equation (see [`ValveParams::gas_coefficients`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GasCoefficients<T> {
+    /// Upstream/downstream pressure ratio at which the flow chokes.
+    pub choke_ratio: T,
+    /// `sqrt(gamma / (Z R T) (2 / (gamma + 1))^((gamma + 1) / (gamma - 1)))`.
+    pub choked: T,
+    /// `2 gamma / (Z R T (gamma - 1))`.
+    pub subsonic: T,
+    /// `1 / gamma`.
+    pub inv_gamma: T,
+}
+
+/// The paper's f_g with precomputed gas constants. The non-choked bracket
+/// `rho^(2/g) - rho^((g+1)/g)` is evaluated as `a (a - rho)` with `a = rho^(1/g)`.
+fn gas_flow_with<T: Real>(gc: &GasCoefficients<T>, p1: T, p2: T, c: T, area: T) -> T {
+    if area <= T::zero() || !(p1 > T::zero() || p2 > T::zero()) {
+        return T::zero();
+    }
+    let (up, down, sign) = if p1 >= p2 {
+        (p1, p2, T::one())
+    } else {
+        (p2, p1, -T::one())
+    };
+    let flow = if up >= gc.choke_ratio * down {
+        c * area * up * gc.choked
+    } else {
+        let ratio = down / up;
+        let a = ratio.powf(gc.inv_gamma);
+        let bracket = a * (a - ratio);
+        let bracket = if bracket > T::zero() {
+            bracket
+        } else {
+            T::zero()
+        };
+        c * area * up * (gc.subsonic * bracket).sqrt()
+    };
+    sign * flow
+}
+
+/// Flows and forces at one state.
+struct Rates<T> {
+    dm_t: T,
+    dm_b: T,
+    spring: T,
+    force: T,
 }
 
 /// Number of equal sub-steps (at least one, at most 1e6) that keeps each below `max_h`.
@@ -603,6 +724,13 @@ pub struct ProcessNoise<T> {
     pub v: T,
     /// Gas masses, relative [1 per sqrt(s)].
     pub mass_rel: T,
+    /// Multiplicative noise on each step's damage increment of the sliding modes (friction,
+    /// spring, internal leak): the increment is scaled by `1 + sliding_rel * N(0, 1)`.
+    /// Proportional to the particle's own progression, so a mode a particle believes
+    /// inactive stays put.
+    pub sliding_rel: T,
+    /// The same for the time-driven external leaks.
+    pub leak_rel: T,
 }
 
 impl<T: Real> Default for ProcessNoise<T> {
@@ -610,6 +738,8 @@ impl<T: Real> Default for ProcessNoise<T> {
         Self {
             v: T::zero(),
             mass_rel: T::zero(),
+            sliding_rel: T::zero(),
+            leak_rel: T::zero(),
         }
     }
 }
@@ -681,6 +811,26 @@ impl<T: Real> Stochastic<T, NX, NU> for Valve<T> {
     ) -> SVector<T, NX> {
         let mut next = self.params.advance(x, u, dt);
         let pn = self.process_noise;
+        if pn.sliding_rel > T::zero() || pn.leak_rel > T::zero() {
+            for (mode, rel) in [
+                (DamageMode::Friction, pn.sliding_rel),
+                (DamageMode::Spring, pn.sliding_rel),
+                (DamageMode::InternalLeak, pn.sliding_rel),
+                (DamageMode::TopLeak, pn.leak_rel),
+                (DamageMode::BottomLeak, pn.leak_rel),
+            ] {
+                let i = mode.damage_index();
+                let before = x.get(i).copied().unwrap_or_else(T::zero);
+                if let Some(d) = next.get_mut(i) {
+                    let increment = *d - before;
+                    if increment != T::zero() && rel > T::zero() {
+                        let moved =
+                            *d + increment * rel * crate::random::standard_normal::<T, R>(rng);
+                        *d = if moved > T::zero() { moved } else { T::zero() };
+                    }
+                }
+            }
+        }
         if pn.v > T::zero() || pn.mass_rel > T::zero() {
             let sq = dt.sqrt();
             let dv = crate::random::standard_normal::<T, R>(rng) * pn.v * sq;
@@ -787,6 +937,10 @@ pub struct CycleTiming<T> {
     pub t_close: T,
     /// Whether the spring closes the open valve when supply pressure is lost.
     pub closes_on_supply_loss: bool,
+    /// Sliding work over the cycle `[friction, spring]` [J]: the integrals of |F_f v| and
+    /// |F_s v| that, times the wear parameters, give the cycle's friction, internal-leak and
+    /// spring damage.
+    pub sliding_work: [T; 2],
 }
 
 impl<T: Real> CycleTiming<T> {
@@ -804,6 +958,7 @@ impl<T: Real> CycleTiming<T> {
 struct Phase<T> {
     start: T,
     arrive: T,
+    work: [T; 2],
 }
 
 /// Simulates one half cycle of `steps` steps from `state`; motion starts when the position
@@ -820,12 +975,16 @@ fn run_phase<T: Real>(
     let mut phase = Phase {
         start: never,
         arrive: never,
+        work: [T::zero(); 2],
     };
     let zero = T::zero();
     let mut quiet = false;
     for i in 1..=steps {
         if !quiet {
-            *state = params.advance(state, u, dt);
+            let (next, [wf, ws]) = params.advance_with_work(state, u, dt);
+            *state = next;
+            let [pf, ps] = phase.work;
+            phase.work = [pf + wf, ps + ws];
         }
         let [[x, ..]] = state.data.0;
         let t = dt * cast::<T>(f64::from(i));
@@ -842,10 +1001,19 @@ fn run_phase<T: Real>(
         }
         if phase.arrive != never && !quiet {
             // Once settled with nothing time-driven left, the rest of the half is idle.
-            quiet = params.advance_quiescent(state, u, dt).is_some();
+            quiet = is_idle(params, state, u);
         }
     }
     phase
+}
+
+/// Quiescent with no time-driven damage: the state stays exactly as it is.
+fn is_idle<T: Real>(params: &ValveParams<T>, s: &SVector<T, NX>, u: &SVector<T, NU>) -> bool {
+    let [[.., w_et, w_eb]] = s.data.0;
+    w_et == T::zero()
+        && w_eb == T::zero()
+        && params.quiescent_rate_tol > T::zero()
+        && params.is_quiescent(s, u)
 }
 
 /// Simulates one valve cycle from `state` (open command for the first half period, close for
@@ -893,6 +1061,7 @@ pub fn simulate_cycle<T: Real>(
         t_close2: diff(close.arrive, close.start),
         t_close: close.arrive,
         closes_on_supply_loss: closes,
+        sliding_work: [open.work[0] + close.work[0], open.work[1] + close.work[1]],
     };
     (timing, s)
 }
@@ -991,19 +1160,7 @@ pub fn fails_with<T: Real>(
     mode: DamageMode,
     value: T,
 ) -> bool {
-    let mut s = *nominal;
-    if let Some(d) = s.get_mut(mode.damage_index()) {
-        *d = value;
-    }
-    // Settle the chambers at the new damage (one closed half cycle), then time a cycle.
-    let [p_l, p_r] = req.fluid;
-    let steps = half_cycle_steps(req);
-    let u_close = params.command_input(false, p_l, p_r);
-    for _ in 0..steps {
-        s = params.advance(&s, &u_close, req.dt);
-    }
-    let (timing, _) = simulate_cycle(params, req, &s);
-    timing.failed(req)
+    cycle_at_damage(params, req, nominal, mode, value).failed(req)
 }
 
 /// Bisection for the boundary between `ok` (meets requirements) and `bad` (fails) to a
@@ -1094,6 +1251,169 @@ pub fn compute_damage_thresholds<T: Real>(
         },
         functional,
     ))
+}
+
+/// Grid points per damage mode of [`DamageRateTable`].
+pub const RATE_GRID: usize = 24;
+
+/// Cycle-level damage rates: for each mode, the driving quantity of one cycle (sliding work
+/// in J for friction, spring and internal leak; the period in s for the external leaks) as a
+/// function of that mode's damage, the others nominal. One cycle then changes damage `d` by
+/// `w * work(d)` (minus for the spring), which is how prediction crosses a hundred cycles
+/// per particle without integrating them (see `docs/deviations.md`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DamageRateTable<T> {
+    /// Damage grid per mode (increasing for growing damage, decreasing for the spring).
+    pub damage: [[T; RATE_GRID]; 5],
+    /// Driving quantity per cycle at each grid point.
+    pub work: [[T; RATE_GRID]; 5],
+    /// Cycle period [s].
+    pub period: T,
+}
+
+impl<T: Real> DamageRateTable<T> {
+    /// Tabulates the cycle work from the nominal damage to 1.25 times the distance to each
+    /// threshold (one settling half cycle, then a timed cycle per grid point).
+    pub fn compute(
+        params: &ValveParams<T>,
+        req: &Requirements<T>,
+        thresholds: &DamageThresholds<T>,
+    ) -> Self {
+        let nominal = params.nominal_state(cast(6000.0), cast(48000.0), [T::zero(); 5]);
+        let mut damage = [[T::zero(); RATE_GRID]; 5];
+        let mut work = [[T::zero(); RATE_GRID]; 5];
+        let last: T = cast((RATE_GRID - 1) as f64);
+        let reach: T = cast(1.25);
+        for ((mode, grid), works) in DamageMode::ALL
+            .iter()
+            .zip(damage.iter_mut())
+            .zip(work.iter_mut())
+        {
+            let start = nominal
+                .get(mode.damage_index())
+                .copied()
+                .unwrap_or_else(T::zero);
+            let span = (thresholds.of(*mode) - start) * reach;
+            for (i, (d, w)) in grid.iter_mut().zip(works.iter_mut()).enumerate() {
+                *d = start + span * cast::<T>(i as f64) / last;
+                *w = match mode {
+                    DamageMode::TopLeak | DamageMode::BottomLeak => req.period,
+                    _ => {
+                        let timing = cycle_at_damage(params, req, &nominal, *mode, *d);
+                        let [friction, spring] = timing.sliding_work;
+                        if *mode == DamageMode::Spring {
+                            spring
+                        } else {
+                            friction
+                        }
+                    }
+                };
+            }
+        }
+        Self {
+            damage,
+            work,
+            period: req.period,
+        }
+    }
+
+    /// Driving quantity per cycle of `mode` at damage `d` (linear interpolation, held
+    /// constant beyond the grid).
+    pub fn work_at(&self, mode: DamageMode, d: T) -> T {
+        let i = mode.damage_index() - idx::R;
+        let (Some(grid), Some(works)) = (self.damage.get(i), self.work.get(i)) else {
+            return T::zero();
+        };
+        let increasing = grid.last().copied().unwrap_or_else(T::zero)
+            >= grid.first().copied().unwrap_or_else(T::zero);
+        let mut prev: Option<(T, T)> = None;
+        for (&g, &w) in grid.iter().zip(works.iter()) {
+            let past = if increasing { d <= g } else { d >= g };
+            if past {
+                return match prev {
+                    None => w,
+                    Some((g0, w0)) => {
+                        let f = if g == g0 {
+                            T::zero()
+                        } else {
+                            (d - g0) / (g - g0)
+                        };
+                        w0 + (w - w0) * f
+                    }
+                };
+            }
+            prev = Some((g, w));
+        }
+        works.last().copied().unwrap_or_else(T::zero)
+    }
+
+    /// The state after `cycles` (may be fractional) cycles at the tabulated rates: each
+    /// damage variable moves by its wear parameter times the cycle work.
+    pub fn advance_cycles(&self, s: &SVector<T, NX>, cycles: T) -> SVector<T, NX> {
+        let mut next = *s;
+        for mode in DamageMode::ALL {
+            let d = s.get(mode.damage_index()).copied().unwrap_or_else(T::zero);
+            let w = s.get(mode.wear_index()).copied().unwrap_or_else(T::zero);
+            let delta = w * self.work_at(mode, d) * cycles;
+            let moved = if mode == DamageMode::Spring {
+                d - delta
+            } else {
+                d + delta
+            };
+            if let Some(slot) = next.get_mut(mode.damage_index()) {
+                *slot = if moved > T::zero() { moved } else { T::zero() };
+            }
+        }
+        next
+    }
+}
+
+/// One cycle after settling the chambers with damage `mode` set to `value`.
+fn cycle_at_damage<T: Real>(
+    params: &ValveParams<T>,
+    req: &Requirements<T>,
+    nominal: &SVector<T, NX>,
+    mode: DamageMode,
+    value: T,
+) -> CycleTiming<T> {
+    let mut s = *nominal;
+    if let Some(d) = s.get_mut(mode.damage_index()) {
+        *d = value;
+    }
+    let [p_l, p_r] = req.fluid;
+    let u_close = params.command_input(false, p_l, p_r);
+    for _ in 0..half_cycle_steps(req) {
+        s = params.advance(&s, &u_close, req.dt);
+    }
+    simulate_cycle(params, req, &s).0
+}
+
+/// Cycle-level model for EOL prediction with [`crate::prognose`]: one step of `dt` advances
+/// `dt` cycles at the tabulated damage rates (the dynamic states are not simulated).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CycleRateModel<T> {
+    pub table: DamageRateTable<T>,
+}
+
+impl<T: Real> Model<T, NX, NU> for CycleRateModel<T> {
+    fn step(&self, x: &SVector<T, NX>, _u: &SVector<T, NU>, dt: T) -> SVector<T, NX> {
+        self.table.advance_cycles(x, dt)
+    }
+}
+
+impl<T: Real> Stochastic<T, NX, NU> for CycleRateModel<T> {
+    fn measurement_len(&self) -> usize {
+        0
+    }
+    fn log_likelihood(&self, _x: &SVector<T, NX>, _u: &SVector<T, NU>, _y: &[T]) -> T {
+        T::zero()
+    }
+}
+
+impl<T: Real> crate::prognose::EndOfLife<T, NX> for DamageThresholds<T> {
+    fn reached(&self, x: &SVector<T, NX>) -> bool {
+        self.exceeded(x)
+    }
 }
 
 #[cfg(test)]

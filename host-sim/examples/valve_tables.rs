@@ -1,0 +1,52 @@
+//! The valve paper's Table 2 and Table 3 campaigns, printed beside the paper's numbers.
+//! `cargo run --release -p prognos-sim --example valve_tables -- table2 [runs] [seed]`
+//! `cargo run --release -p prognos-sim --example valve_tables -- table3 [seed]`
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let which = args.first().map(String::as_str).unwrap_or("table2");
+    let num = |i: usize, default: u64| -> u64 {
+        args.get(i)
+            .map_or(default, |a| a.parse().expect("integer argument"))
+    };
+    match which {
+        "table2" => {
+            let result = prognos_sim::valve::table2(num(1, 5) as usize, num(2, 1));
+            print!("{}", result.render());
+        }
+        "table3" => {
+            let result = prognos_sim::valve::table3(num(1, 1));
+            print!("{}", result.render());
+        }
+        "table3-diag" => {
+            // Table 3 with 500 particles, printing every estimated wear every 5 cycles.
+            let setup = prognos_sim::valve::ValveSetup::new();
+            let exp = prognos_sim::valve::table3_experiment(&setup, num(1, 1));
+            let run = prognos_sim::valve::run_experiment::<500>(&setup, &exp);
+            for (mode, est) in exp.estimated.iter().zip(&run.estimate_per_cycle) {
+                let i = mode.wear_index() - 9;
+                let scale = if exp.true_wear[i] > 0.0 {
+                    exp.true_wear[i]
+                } else {
+                    exp.wear_reference[i]
+                };
+                let v: Vec<String> = est
+                    .iter()
+                    .step_by(5)
+                    .map(|e| format!("{:.3}", e / scale))
+                    .collect();
+                println!("{:>22} (/ {:.3e}): {}", mode.name(), scale, v.join(" "));
+            }
+            for p in &run.predictions {
+                println!(
+                    "t_P {:5.1} RUL* {:5.1} median {:5.1}",
+                    p.t_p, p.true_rul, p.median_rul
+                );
+            }
+        }
+        other => {
+            eprintln!("unknown table `{other}` (table2 or table3)");
+            std::process::exit(2);
+        }
+    }
+}
