@@ -312,7 +312,7 @@ pub fn demo(
     only: Option<&str>,
     plots: bool,
 ) -> Result<(), SimError> {
-    let paper_systems = ["reaction_wheel", "scooter"];
+    let paper_systems = ["valve", "reaction_wheel", "scooter"];
     if let Some(name) = only
         && registry.get(name).is_none()
         && !paper_systems.contains(&name)
