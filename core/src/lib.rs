@@ -22,6 +22,8 @@ extern crate std;
 
 pub mod error;
 pub mod filter;
+pub mod health;
+pub mod learn;
 pub mod metrics;
 pub mod model;
 pub mod pipeline;

@@ -1,0 +1,3 @@
+//! Identification of models of signals on board.
+
+pub mod ar;
