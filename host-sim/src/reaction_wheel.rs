@@ -410,6 +410,7 @@ pub struct BurstThermometer<const N: usize> {
     settings: BurstSettings,
     truth_rng: Xoshiro256PlusPlus,
     filter_rng: Xoshiro256PlusPlus,
+    history: [Option<(f64, f64)>; 2],
 }
 
 impl<const N: usize> BurstThermometer<N> {
@@ -446,6 +447,7 @@ impl<const N: usize> BurstThermometer<N> {
             settings,
             truth_rng: Xoshiro256PlusPlus::seed_from_u64(seed),
             filter_rng: Xoshiro256PlusPlus::seed_from_u64(0),
+            history: [None, None],
         };
         let (m, sd) = f.prior_temperature;
         thermometer
@@ -472,12 +474,18 @@ impl<const N: usize> BurstThermometer<N> {
         wheel.time = t_start;
         let first = sensors.measure(&wheel, &mut self.truth_rng);
         let gap = self.settings.gap_spread;
+        // Between bursts the temperature particles follow the trend of the last two burst
+        // estimates (linear extrapolation), then spread by the allowed drift.
+        let shift = match self.history {
+            [Some((t1, x1)), Some((t2, x2))] if t2 > t1 => (x2 - x1) / (t2 - t1) * (t_start - t2),
+            _ => 0.0,
+        };
         let rng = &mut self.filter_rng;
         for p in self.filter.filter_mut().particles_mut().iter_mut() {
             p.x = 0.19 * command;
             p.y =
                 first[1] + sensors.speed_std * prognos_core::random::standard_normal::<f64, _>(rng);
-            p.z += gap * prognos_core::random::standard_normal::<f64, _>(rng);
+            p.z += shift + gap * prognos_core::random::standard_normal::<f64, _>(rng);
         }
         self.filter.reset_history();
         let steps = (self.settings.burst_s / dt).round() as usize;
@@ -493,7 +501,9 @@ impl<const N: usize> BurstThermometer<N> {
                 .step(&self.model, &u, Some(&y), dt, gain, &mut self.filter_rng);
             t += dt;
         }
-        self.filter.filter().mean().z
+        let estimate = self.filter.filter().mean().z;
+        self.history = [self.history[1], Some((t, estimate))];
+        estimate
     }
 }
 
