@@ -1,1 +1,3 @@
+//! Prognos host simulator.
 
+pub mod bearing;
