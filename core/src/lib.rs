@@ -22,6 +22,7 @@ extern crate std;
 
 pub mod error;
 pub mod filter;
+pub mod learn;
 pub mod metrics;
 pub mod model;
 pub mod prognose;

@@ -1,0 +1,3 @@
+//! Learned models: Gaussian processes (and autoregressive models).
+
+pub mod gp;
