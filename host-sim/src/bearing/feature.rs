@@ -66,6 +66,12 @@ impl EnvelopeAnalyser {
         k as f64 * self.sample_rate / self.len as f64
     }
 
+    /// Amplitude of the envelope spectrum's line at `frequency`: the square root of the power
+    /// in a band of `+-half_width` Hz around it.
+    pub fn line_amplitude(&self, x: &[f64], frequency: f64, half_width: f64) -> f64 {
+        self.line_power(x, frequency, half_width).sqrt()
+    }
+
     /// Power of the envelope spectrum in a band of `+-half_width` Hz around `frequency`.
     pub fn line_power(&self, x: &[f64], frequency: f64, half_width: f64) -> f64 {
         let psd = self.envelope_psd(x);
@@ -78,12 +84,12 @@ impl EnvelopeAnalyser {
     }
 }
 
-/// Maps the line power to `r_feat`: linear, 0.001 at the expected power of a 5 um^2 pit and 1
-/// at that of a 70 um^2 pit.
+/// Maps the line amplitude to `r_feat`: linear, 0.001 at the expected amplitude of a 5 um^2
+/// pit and 1 at that of a 70 um^2 pit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FeatureCalibration {
-    pub power_at_start: f64,
-    pub power_at_failure: f64,
+    pub amplitude_at_start: f64,
+    pub amplitude_at_failure: f64,
 }
 
 /// Feature extraction: vibration model, analyser and calibration together.
@@ -104,18 +110,18 @@ impl FeatureExtractor {
         let analyser = EnvelopeAnalyser::new(model.samples, model.sample_rate);
         let half_width = 1.5;
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(0xCA11B);
-        let mut mean_power = |pitting: f64| {
+        let mut mean_amplitude = |pitting: f64| {
             (0..records)
                 .map(|_| {
                     let x = model.record(pitting, &mut rng);
-                    analyser.line_power(&x, model.fault_frequency, half_width)
+                    analyser.line_amplitude(&x, model.fault_frequency, half_width)
                 })
                 .sum::<f64>()
                 / records as f64
         };
         let calibration = FeatureCalibration {
-            power_at_start: mean_power(PITTING_START),
-            power_at_failure: mean_power(PITTING_FAILURE),
+            amplitude_at_start: mean_amplitude(PITTING_START),
+            amplitude_at_failure: mean_amplitude(PITTING_FAILURE),
         };
         Self {
             model,
@@ -126,18 +132,18 @@ impl FeatureExtractor {
     }
 
     /// Normalises a line power to `r_feat`.
-    pub fn normalise(&self, power: f64) -> f64 {
+    pub fn normalise(&self, amplitude: f64) -> f64 {
         let c = self.calibration;
         FEATURE_AT_START
-            + (FEATURE_AT_FAILURE - FEATURE_AT_START) * (power - c.power_at_start)
-                / (c.power_at_failure - c.power_at_start)
+            + (FEATURE_AT_FAILURE - FEATURE_AT_START) * (amplitude - c.amplitude_at_start)
+                / (c.amplitude_at_failure - c.amplitude_at_start)
     }
 
     /// Measures `r_feat` from one vibration record.
     pub fn feature_of_record(&self, x: &[f64]) -> f64 {
         self.normalise(
             self.analyser
-                .line_power(x, self.model.fault_frequency, self.half_width),
+                .line_amplitude(x, self.model.fault_frequency, self.half_width),
         )
     }
 

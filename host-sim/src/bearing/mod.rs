@@ -3,5 +3,13 @@
 
 pub mod degradation;
 pub mod feature;
+pub mod prognosis;
+pub mod tables;
+pub mod train;
 pub mod trial;
 pub mod vibration;
+
+pub use tables::{CampaignConfig, Tables, tables};
+
+#[cfg(test)]
+mod tests;

@@ -42,14 +42,14 @@ impl Default for VibrationModel {
             fault_frequency: 127.0,
             jitter: 0.01,
             amplitude_scatter: 0.2,
-            gain_per_pitting: 0.015,
+            gain_per_pitting: 0.04,
             cage_frequency: 20.0,
             cage_depth: 0.5,
             path_frequency: 1600.0,
             path_damping: 0.05,
             other_frequency: 20.0,
-            other_amplitude: 2.0,
-            noise_std: 0.5,
+            other_amplitude: 6.0,
+            noise_std: 0.3,
         }
     }
 }
