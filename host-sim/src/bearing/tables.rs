@@ -193,24 +193,35 @@ pub fn tables(generator: &TrialGenerator, campaign: CampaignConfig) -> anyhow::R
     let g = |i: usize| &*c_gps[i];
     let single = eval(&|t| run([g(0)], t, &c_settings))?;
     let imm2 = eval(&|t| run([g(0), g(1)], t, &c_settings))?;
-    let imm8 = eval(&|t| {
-        run(
-            [g(0), g(1), g(2), g(3), g(4), g(5), g(6), g(7)],
-            t,
-            &c_settings,
-        )
-    })?;
+    let imm8 = eval(&|t| run(std::array::from_fn::<_, 8, _>(g), t, &c_settings))?;
+    let sticky = PrognosisSettings {
+        stay_probability: 0.998,
+        ..c_settings
+    };
+    let imm8_sticky = eval(&|t| run(std::array::from_fn::<_, 8, _>(g), t, &sticky))?;
+    let imm16_sticky = if c_gps.len() >= 16 {
+        Some(eval(&|t| {
+            run(std::array::from_fn::<_, 16, _>(g), t, &sticky)
+        })?)
+    } else {
+        None
+    };
     let pooled_rows = eval(&|t| run([&*pooled], t, &c_settings))?;
+    let mut rows = vec![
+        summarise("GP-UKF, trained on 1 trial", &single),
+        summarise("IMM of 2 GP-UKFs (paper's set-up)", &imm2),
+        summarise("IMM of 8 GP-UKFs (one per training trial)", &imm8),
+        summarise("IMM of 8 GP-UKFs, stay probability 0.998", &imm8_sticky),
+        summarise("GP-UKF, one GP on all training trials", &pooled_rows),
+    ];
+    if let Some(r) = imm16_sticky {
+        rows.push(summarise("IMM of 16 GP-UKFs, stay probability 0.998", &r));
+    }
     Ok(Tables {
         table4,
         table5,
         table6,
-        campaign: vec![
-            summarise("GP-UKF, trained on 1 trial", &single),
-            summarise("IMM of 2 GP-UKFs (paper's set-up)", &imm2),
-            summarise("IMM of 8 GP-UKFs (one per training trial)", &imm8),
-            summarise("GP-UKF, one GP on all 8 training trials", &pooled_rows),
-        ],
+        campaign: rows,
         campaign_trials: test_set.len(),
         campaign_training: train_set.len(),
         measurement_variance: settings.measurement_variance,
