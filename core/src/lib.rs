@@ -22,9 +22,12 @@ extern crate std;
 
 pub mod error;
 pub mod filter;
+pub mod health;
 pub mod learn;
 pub mod metrics;
 pub mod model;
+pub mod pipeline;
+pub mod plants;
 pub mod prognose;
 pub mod random;
 pub mod real;

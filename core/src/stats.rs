@@ -17,10 +17,20 @@ pub fn sort_values<T: Real>(values: &mut [T]) {
     values.sort_unstable_by(|a, b| a.partial_cmp(b).unwrap_or(Ordering::Equal));
 }
 
+/// Largest weight, by which sums of weights are scaled so they cannot overflow.
+fn weight_scale<T: Real>(samples: &[(T, T)]) -> T {
+    samples.iter().fold(T::zero(), |m, s| m.max(s.1))
+}
+
 /// Weighted mean of `(value, weight)` pairs; `None` when the weights sum to zero.
 pub fn weighted_mean<T: Real>(samples: &[(T, T)]) -> Option<T> {
+    let scale = weight_scale(samples);
+    if !(scale > T::zero()) {
+        return None;
+    }
     let (mut sw, mut swx) = (T::zero(), T::zero());
     for &(x, w) in samples {
+        let w = w / scale;
         sw += w;
         swx += w * x;
     }
@@ -30,7 +40,11 @@ pub fn weighted_mean<T: Real>(samples: &[(T, T)]) -> Option<T> {
 /// Weighted quantile `q` in [0, 1] of pairs already sorted by value: the smallest value whose
 /// cumulative weight reaches `q` of the total. `None` for empty input or zero total weight.
 pub fn weighted_quantile_sorted<T: Real>(sorted: &[(T, T)], q: T) -> Option<T> {
-    let total = sorted.iter().fold(T::zero(), |acc, s| acc + s.1);
+    let scale = weight_scale(sorted);
+    if !(scale > T::zero()) {
+        return None;
+    }
+    let total = sorted.iter().fold(T::zero(), |acc, s| acc + s.1 / scale);
     if !(total > T::zero()) {
         return None;
     }
@@ -38,7 +52,7 @@ pub fn weighted_quantile_sorted<T: Real>(sorted: &[(T, T)], q: T) -> Option<T> {
     let mut cum = T::zero();
     let mut last = None;
     for &(x, w) in sorted {
-        cum += w;
+        cum += w / scale;
         last = Some(x);
         if cum >= target && w > T::zero() {
             return Some(x);

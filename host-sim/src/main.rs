@@ -1,1 +1,5 @@
-fn main() {}
+//! The `prognos` command-line program.
+
+fn main() -> std::process::ExitCode {
+    prognos_sim::cli::main_with(prognos_sim::registry::Registry::builtin())
+}

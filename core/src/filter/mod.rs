@@ -1,5 +1,6 @@
 //! Recursive Bayesian filters.
 
+pub mod adaptive;
 pub mod imm;
 pub mod particle;
 pub mod resample;

@@ -332,7 +332,10 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
             return Err(Error::NonFiniteInput);
         }
         let neg_inf = T::min_value().unwrap_or(-T::MAX_FINITE);
+        // A true -inf (not -MAX_FINITE): a zero likelihood must stay zero in the sums below.
+        let zero_likelihood: T = cast(f64::NEG_INFINITY);
         let mut max_ll = neg_inf;
+        let mut max_total = zero_likelihood;
         for ((p, ll), lw) in self
             .particles
             .iter()
@@ -341,13 +344,17 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
         {
             let l = model.log_likelihood(p, u, y);
             // NaN likelihoods (a model bug or an impossible state) count as zero likelihood.
-            let l = if l.nan() { neg_inf } else { l };
-            *ll = *lw + l;
+            let l = if l.nan() { zero_likelihood } else { l };
+            let total = *lw + l;
+            // -inf + inf is NaN: also a zero.
+            *ll = if total.nan() { zero_likelihood } else { total };
             if l > max_ll {
                 max_ll = l;
             }
+            if *ll > max_total {
+                max_total = *ll;
+            }
         }
-        let log_evidence = log_sum_exp(&self.scratch);
         let mut report = PfReport {
             ess: T::zero(),
             fused: false,
@@ -355,14 +362,21 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
             max_log_likelihood: max_ll,
             flags: Flags::NONE,
         };
-        if !log_evidence.finite() {
+        if !max_total.finite() {
             report.flags.insert(Flags::WEIGHT_COLLAPSE_RECOVERED);
             report.ess = self.ess();
             return Ok(report);
         }
-        for (lw, s) in self.log_weights.iter_mut().zip(self.scratch.iter()) {
-            *lw = *s - log_evidence;
+        // Shift by the largest term before the log-sum-exp: with log-likelihoods of -1e300 the
+        // particles' differences would otherwise be absorbed and the weights not sum to one.
+        for s in self.scratch.iter_mut() {
+            *s -= max_total;
         }
+        let log_sum = log_sum_exp(&self.scratch);
+        for (lw, s) in self.log_weights.iter_mut().zip(self.scratch.iter()) {
+            *lw = *s - log_sum;
+        }
+        let log_evidence = max_total + log_sum;
         report.fused = true;
         report.log_evidence = log_evidence;
         report.ess = self.ess();
@@ -426,6 +440,31 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
             flags.insert(Flags::ROUGHENED);
         }
         flags
+    }
+
+    /// Replaces each particle's normalised log-weight by `f(particle, log_weight)` and
+    /// renormalises (for weight mutations such as `filter::adaptive`'s sample improvement).
+    /// If no new weight is positive and finite the weights stay unchanged and `false` is
+    /// returned. NaN results count as zero weight.
+    pub fn reweight(&mut self, mut f: impl FnMut(&SVector<T, NX>, T) -> T) -> bool {
+        let neg_inf = T::min_value().unwrap_or(-T::MAX_FINITE);
+        for ((s, p), lw) in self
+            .scratch
+            .iter_mut()
+            .zip(self.particles.iter())
+            .zip(self.log_weights.iter())
+        {
+            let v = f(p, *lw);
+            *s = if v.nan() { neg_inf } else { v };
+        }
+        let total = log_sum_exp(&self.scratch);
+        if !total.finite() {
+            return false;
+        }
+        for (lw, s) in self.log_weights.iter_mut().zip(self.scratch.iter()) {
+            *lw = *s - total;
+        }
+        true
     }
 
     /// Roughening: Gaussian jitter proportional to each entry's particle range.

@@ -1,6 +1,8 @@
 //! Unscented Kalman filter with a const-generic sigma-point count, in the form of van der
-//! Merwe's scaled unscented transform (the form filterpy's `UnscentedKalmanFilter` uses:
-//! the update reuses the sigma points propagated by the prediction).
+//! Merwe's scaled unscented transform (the form filterpy's `UnscentedKalmanFilter` uses: the
+//! prediction ends by drawing fresh sigma points from the prior mean and covariance, Q
+//! included, and the update transforms those through the measurement function; reusing the
+//! propagated points would leave Q out of the innovation and cross covariances).
 //!
 //! Joint state-parameter estimation augments the state with the parameters: the model leaves
 //! them constant and `Q` gives them a random-walk variance.
@@ -57,7 +59,7 @@ pub struct Ukf<T: Real, const NX: usize, const NS: usize> {
     wm: [T; NS],
     wc: [T; NS],
     lambda: T,
-    /// The sigma points hold the propagated prior for the next update.
+    /// The sigma points were drawn from the current prior (x, P) by the last prediction.
     propagated: bool,
     /// NIS gate: measurements with a larger NIS are rejected (`MAX_FINITE` disables it).
     gate: T,
@@ -224,15 +226,21 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
         if symmetrise(&mut p) {
             flags.insert(Flags::COVARIANCE_SYMMETRISED);
         }
+        // Finite sigma points can still overflow in the outer products.
+        if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
+            return Err(Error::NonFiniteState);
+        }
+        let prior_sigmas = self.sigma_points(&x, &p)?;
         self.x = x;
         self.p = p;
-        self.sigmas = pts;
+        self.sigmas = prior_sigmas;
         self.propagated = true;
         Ok(flags)
     }
 
     /// Measurement update with measurement `y` (length `NY`) and its noise covariance `r`.
-    /// Errors leave the filter unchanged. A measurement whose NIS exceeds the gate is not
+    /// Errors leave the filter unchanged, including a posterior covariance that is not
+    /// positive definite ([`Error::NotPositiveDefinite`]). A measurement whose NIS exceeds the gate is not
     /// fused (`fused = false`, [`Flags::MEASUREMENT_REJECTED`]).
     pub fn update<M, const NU: usize, const NY: usize>(
         &mut self,
@@ -306,6 +314,11 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
         }
         if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
             return Err(Error::NonFiniteState);
+        }
+        // `P - K S K^T` can lose definiteness to cancellation (e.g. after a wild measurement
+        // threw the state far out); keep the last valid estimate rather than store it.
+        if Cholesky::new(p).is_none() {
+            return Err(Error::NotPositiveDefinite);
         }
         self.x = x;
         self.p = p;

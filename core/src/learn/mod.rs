@@ -1,3 +1,4 @@
-//! Learned models: Gaussian processes (and autoregressive models).
+//! Learned models on board: autoregressive identification and Gaussian processes.
 
+pub mod ar;
 pub mod gp;

@@ -1,0 +1,483 @@
+//! Reaction-wheel prognoser (Alidadi & Rahimi 2023): APF lubricant temperature at the wheel's
+//! sample rate -> interval exposure -> two-step PF for the lubricant-loss parameters -> RUL.
+//!
+//! One [`ReactionWheel::step`] per sample with the command voltage and the measurement
+//! `[I_m, omega_m]` or, at the end of a consumption interval, `[I_m, omega_m, X]` where `X` is
+//! the cumulative lubricant-consumption reading (mL). `None` is a missing sample: the filter
+//! predicts only (documented predict-only step). Bad data returns an error and changes nothing.
+//!
+//! Size: the step-1 filter holds `N` 3-state particles and the two loss filters `M` scalar
+//! particles each; `N = 100, M = 200` in f32 is about 9 KiB.
+
+use crate::error::Error;
+use crate::filter::adaptive::{AdaptiveConfig, AdaptiveFilter, Method};
+use crate::filter::particle::{ParticleFilter, PfConfig};
+use crate::plants::reaction_wheel::{
+    BETA_UNIT, ExposureAccumulator, IntervalExposure, LossAccumulationModel, LossRateModel,
+    LossRatioModel, WheelTemperatureModel,
+};
+use crate::prognose::eol::{EndOfLife, PredictionSettings, predict_eol, rul_distribution};
+use crate::real::{Real, cast};
+use crate::safeguard::Flags;
+use crate::stats::Summary;
+use nalgebra::{SVector, Vector2, Vector3};
+use rand_core::Rng;
+
+/// Settings of the whole pipeline.
+#[derive(Clone, Copy, Debug)]
+pub struct ReactionWheelConfig<T: Real> {
+    /// Step-1 estimation model (sensor noise, process noise).
+    pub wheel_model: WheelTemperatureModel<T>,
+    /// Step-1 adaptive layer (method, thresholds, spreads).
+    pub temperature_filter: AdaptiveConfig<T, 3>,
+    /// Prior mean and std of the lubricant temperature (degC).
+    pub prior_temperature: (T, T),
+    /// `c_1` at 1 V of the sample improvement; `c_1(V) = gain 10^(1 - V)`.
+    pub improvement_gain: T,
+    /// Relative noise of a consumption reading difference.
+    pub loss_relative_noise: T,
+    /// Random walk per interval of b (degC) and beta (1e-6 mL/s).
+    pub loss_walk: (T, T),
+    /// Priors (mean, std) of b and beta (1e-6 mL/s).
+    pub prior_b: (T, T),
+    /// Prior of beta.
+    pub prior_beta: (T, T),
+}
+
+impl<T: Real> ReactionWheelConfig<T> {
+    /// The settings used for the paper's scenarios, for given sensor noise.
+    pub fn new(current_std: T, speed_std: T) -> Result<Self, Error> {
+        let mut wheel_model = WheelTemperatureModel::new(current_std, speed_std)?;
+        wheel_model.temperature_walk = cast(0.05);
+        wheel_model.speed_process_std = cast(2e-4);
+        Ok(Self {
+            wheel_model,
+            temperature_filter: AdaptiveConfig {
+                method: Method::Apf,
+                ess_threshold: cast(0.5),
+                likelihood_threshold: cast(0.1),
+                min_window: 20,
+                spread_std: Vector3::new(T::zero(), cast(0.01), cast(3.0)),
+                improvement_offset: cast(0.6),
+                improvement_ess: cast(0.9),
+            },
+            prior_temperature: (cast(25.0), cast(4.0)),
+            improvement_gain: T::one(),
+            loss_relative_noise: cast(0.0025),
+            loss_walk: (cast(0.1), cast(0.01)),
+            prior_b: (cast(35.0), cast(8.0)),
+            prior_beta: (cast(7.0), cast(1.5)),
+        })
+    }
+}
+
+/// What one pipeline step reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ReactionWheelReport<T> {
+    /// Lubricant temperature estimate (degC) and its posterior standard deviation.
+    pub temperature: T,
+    /// Posterior standard deviation of the temperature (degC).
+    pub temperature_std: T,
+    /// The sample was missing: the temperature filter only predicted.
+    pub predict_only: bool,
+    /// A consumption interval was closed and the loss filters updated.
+    pub interval_closed: bool,
+    /// Two-step estimate of b (degC).
+    pub b: T,
+    /// Two-step estimate of beta (mL/s).
+    pub beta: T,
+    /// Safeguards that acted.
+    pub flags: Flags,
+}
+
+/// The reaction-wheel prognoser with `N` temperature particles and `M` loss-parameter
+/// particles per loss filter.
+#[derive(Clone, Debug)]
+pub struct ReactionWheel<T: Real, const N: usize, const M: usize> {
+    config: ReactionWheelConfig<T>,
+    temperature: AdaptiveFilter<T, 3, N>,
+    ratio: AdaptiveFilter<T, 1, M>,
+    rate: AdaptiveFilter<T, 1, M>,
+    exposure: ExposureAccumulator<T>,
+    previous_interval: Option<(IntervalExposure<T>, T)>,
+    last_reading: Option<T>,
+    last: Option<(T, T)>,
+}
+
+fn loss_config<T: Real>(walk: T, lower: T, upper: T) -> PfConfig<T, 1> {
+    PfConfig {
+        random_walk_std: SVector::from([walk]),
+        lower: SVector::from([lower]),
+        upper: SVector::from([upper]),
+        ..PfConfig::default()
+    }
+}
+
+fn loss_adaptive<T: Real>(spread: T) -> AdaptiveConfig<T, 1> {
+    AdaptiveConfig {
+        method: Method::AdaptiveResampling,
+        ess_threshold: cast(0.5),
+        likelihood_threshold: cast(0.05),
+        min_window: 3,
+        spread_std: SVector::from([spread]),
+        improvement_offset: T::zero(),
+        improvement_ess: T::one(),
+    }
+}
+
+/// End of life: cumulative consumption reaches the threshold.
+struct ConsumptionThreshold<T>(T);
+
+impl<T: Real> EndOfLife<T, 3> for ConsumptionThreshold<T> {
+    fn reached(&self, x: &Vector3<T>) -> bool {
+        x.x >= self.0
+    }
+}
+
+impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
+    /// A prognoser with particles drawn from the priors.
+    pub fn new<R: Rng + ?Sized>(
+        config: ReactionWheelConfig<T>,
+        rng: &mut R,
+    ) -> Result<Self, Error> {
+        let temperature_pf = ParticleFilter::<T, 3, N>::new(
+            Vector3::zeros(),
+            PfConfig {
+                lower: Vector3::new(cast(-5.0), cast(-1000.0), cast(-40.0)),
+                upper: Vector3::new(cast(5.0), cast(1000.0), cast(150.0)),
+                ..PfConfig::default()
+            },
+        )?;
+        let temperature = AdaptiveFilter::new(temperature_pf, config.temperature_filter)?;
+        let (b0, bs) = config.prior_b;
+        let (beta0, betas) = config.prior_beta;
+        let mut ratio_pf = ParticleFilter::<T, 1, M>::new(
+            SVector::from([b0]),
+            loss_config(config.loss_walk.0, T::zero(), cast(150.0)),
+        )?;
+        ratio_pf.init_gaussian(&SVector::from([b0]), &SVector::from([bs]), rng)?;
+        let mut rate_pf = ParticleFilter::<T, 1, M>::new(
+            SVector::from([beta0]),
+            loss_config(config.loss_walk.1, cast(0.01), cast(100.0)),
+        )?;
+        rate_pf.init_gaussian(&SVector::from([beta0]), &SVector::from([betas]), rng)?;
+        Ok(Self {
+            config,
+            temperature,
+            ratio: AdaptiveFilter::new(ratio_pf, loss_adaptive(cast(4.0)))?,
+            rate: AdaptiveFilter::new(rate_pf, loss_adaptive(cast(0.4)))?,
+            exposure: ExposureAccumulator::default(),
+            previous_interval: None,
+            last_reading: None,
+            last: None,
+        })
+    }
+
+    fn report(
+        &self,
+        predict_only: bool,
+        interval_closed: bool,
+        flags: Flags,
+    ) -> ReactionWheelReport<T> {
+        let mean = self.temperature.filter().mean();
+        let var = self
+            .temperature
+            .filter()
+            .covariance()
+            .get((2, 2))
+            .copied()
+            .unwrap_or_else(T::zero);
+        let (b, beta) = self.loss_parameters();
+        ReactionWheelReport {
+            temperature: mean.z,
+            temperature_std: if var > T::zero() {
+                var.sqrt()
+            } else {
+                T::zero()
+            },
+            predict_only,
+            interval_closed,
+            b,
+            beta,
+            flags,
+        }
+    }
+
+    /// Two-step estimates `(b in degC, beta in mL/s)`.
+    pub fn loss_parameters(&self) -> (T, T) {
+        (
+            self.ratio.filter().mean().x,
+            self.rate.filter().mean().x * cast(BETA_UNIT),
+        )
+    }
+
+    /// The step-1 filter (particles, summaries).
+    pub fn temperature_filter(&self) -> &AdaptiveFilter<T, 3, N> {
+        &self.temperature
+    }
+
+    /// One sample at time `t` (s) with command `command_v` (0-5 V) and measurement `y`:
+    /// `[I_m, omega_m]`, `[I_m, omega_m, X]` (X: cumulative consumption reading, mL, closes
+    /// the interval since the previous reading) or `None` (missing sample: predict-only).
+    /// Times must increase. Errors leave the pipeline unchanged.
+    pub fn step<R: Rng + ?Sized>(
+        &mut self,
+        t: T,
+        command_v: T,
+        y: Option<&[T]>,
+        rng: &mut R,
+    ) -> Result<ReactionWheelReport<T>, Error> {
+        if !t.finite() {
+            return Err(Error::InvalidTimeStep);
+        }
+        WheelTemperatureModel::<T>::check_input(&Vector2::new(command_v, t))?;
+        let reading = match y {
+            Some(y) => {
+                if y.len() != 2 && y.len() != 3 {
+                    return Err(Error::MeasurementLength {
+                        expected: 2,
+                        got: y.len(),
+                    });
+                }
+                let wheel = y.get(..2).ok_or(Error::InsufficientData)?;
+                WheelTemperatureModel::<T>::check_measurement(wheel)?;
+                match y.get(2) {
+                    Some(&x) => {
+                        let floor = self.last_reading.unwrap_or_else(T::zero);
+                        if !x.finite() {
+                            return Err(Error::NonFiniteMeasurement);
+                        }
+                        if x < floor {
+                            return Err(Error::OutOfRange("cumulative consumption"));
+                        }
+                        Some(x)
+                    }
+                    None => None,
+                }
+            }
+            None => None,
+        };
+        let Some((t_prev, command_prev)) = self.last else {
+            // First sample: initialise the wheel particles on it.
+            let Some(y) = y else {
+                return Err(Error::InsufficientData);
+            };
+            let speed = y.get(1).copied().ok_or(Error::InsufficientData)?;
+            let (m, s) = self.config.prior_temperature;
+            let current = self.config.wheel_model.wheel.drive_gain * command_v;
+            self.temperature.filter_mut().init_gaussian(
+                &Vector3::new(current, speed, m),
+                &Vector3::new(cast(1e-3), self.config.wheel_model.speed_sensor_std, s),
+                rng,
+            )?;
+            self.last = Some((t, command_v));
+            self.last_reading = reading;
+            return Ok(self.report(false, false, Flags::NONE));
+        };
+        let dt = t - t_prev;
+        if !(dt > T::zero()) {
+            return Err(Error::InvalidTimeStep);
+        }
+        let u = Vector2::new(command_prev, t_prev);
+        let gain = self.config.improvement_gain * cast::<T>(10.0).powf(T::one() - command_prev);
+        let wheel_y = y.and_then(|y| y.get(..2));
+        let r = self
+            .temperature
+            .step(&self.config.wheel_model, &u, wheel_y, dt, gain, rng)?;
+        let mut flags = r.filter.flags;
+        // The exposure rejects a non-positive temperature estimate (possible only below
+        // 0 degC); such a sample is left out of the interval and flagged.
+        let t_hat = self.temperature.filter().mean().z;
+        if self.exposure.push(t_hat, dt).is_err() {
+            flags.insert(Flags::MEASUREMENT_REJECTED);
+        }
+        let mut closed = false;
+        if let Some(x) = reading {
+            if let Some(previous) = self.last_reading {
+                let consumption = x - previous;
+                if consumption > T::zero()
+                    && let Ok(exposure) = self.exposure.take()
+                {
+                    self.update_loss(exposure, consumption, rng);
+                    closed = true;
+                }
+            } else {
+                self.exposure = ExposureAccumulator::default();
+            }
+            self.last_reading = Some(x);
+        }
+        self.last = Some((t, command_v));
+        Ok(self.report(wheel_y.is_none(), closed, flags))
+    }
+
+    fn update_loss<R: Rng + ?Sized>(
+        &mut self,
+        exposure: IntervalExposure<T>,
+        consumption: T,
+        rng: &mut R,
+    ) {
+        let noise = self.config.loss_relative_noise;
+        let u = exposure.as_input();
+        let one = T::one();
+        if let Some((before, previous_consumption)) = self.previous_interval {
+            let bu = before.as_input();
+            let u6 = SVector::<T, 6>::from([u.x, u.y, u.z, bu.x, bu.y, bu.z]);
+            let ratio = consumption / previous_consumption;
+            // A rejected update leaves the filter unchanged; the next interval retries.
+            let _ = self.ratio.step(
+                &LossRatioModel {
+                    relative_noise: noise,
+                },
+                &u6,
+                Some(&[ratio]),
+                one,
+                T::zero(),
+                rng,
+            );
+        }
+        let b_hat = self.ratio.filter().mean().x;
+        let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, b_hat]);
+        let _ = self.rate.step(
+            &LossRateModel {
+                relative_noise: noise,
+            },
+            &u4,
+            Some(&[consumption]),
+            one,
+            T::zero(),
+            rng,
+        );
+        self.previous_interval = Some((exposure, consumption));
+    }
+
+    /// RUL distribution (s): time until the cumulative consumption reaches `threshold` (mL)
+    /// from the last reading, with the future lubricant temperature `future_temperature(k)`
+    /// for prediction step `k` of length `step_s`, over at most `max_steps` steps. Uses the
+    /// two-step posterior (b and beta particles paired by index after resampling).
+    #[allow(clippy::too_many_arguments)]
+    pub fn rul<R: Rng + ?Sized>(
+        &self,
+        threshold: T,
+        future_temperature: impl FnMut(u32) -> T,
+        step_s: T,
+        max_steps: u32,
+        states: &mut [Vector3<T>; M],
+        times: &mut [T; M],
+        buf: &mut [(T, T); M],
+        rng: &mut R,
+    ) -> Result<Summary<T>, Error> {
+        let x0 = self.last_reading.ok_or(Error::InsufficientData)?;
+        for ((s, b), beta) in states
+            .iter_mut()
+            .zip(self.ratio.filter().particles().iter())
+            .zip(self.rate.filter().particles().iter())
+        {
+            *s = Vector3::new(x0, b.x, beta.x);
+        }
+        let mut temperature = future_temperature;
+        predict_eol(
+            &LossAccumulationModel,
+            &ConsumptionThreshold(threshold),
+            states.as_slice(),
+            |k| SVector::<T, 1>::from([temperature(k)]),
+            &PredictionSettings::deterministic(step_s, max_steps),
+            rng,
+            times.as_mut_slice(),
+        )?;
+        let mut weights = [T::zero(); M];
+        for (w, (i, _)) in weights.iter_mut().zip(times.iter().enumerate()) {
+            *w = self.ratio.filter().weight(i) * self.rate.filter().weight(i);
+        }
+        rul_distribution(times.as_slice(), &weights, buf.as_mut_slice())
+            .ok_or(Error::InsufficientData)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand_core::SeedableRng;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    fn pipeline() -> (ReactionWheel<f64, 50, 50>, Xoshiro256PlusPlus) {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
+        let cfg = ReactionWheelConfig::new(0.03, 0.003).unwrap();
+        (ReactionWheel::new(cfg, &mut rng).unwrap(), rng)
+    }
+
+    #[test]
+    fn bad_input_is_rejected_and_changes_nothing() {
+        let (mut p, mut rng) = pipeline();
+        assert_eq!(
+            p.step(0.0, 1.0, None, &mut rng).unwrap_err(),
+            Error::InsufficientData
+        );
+        p.step(0.0, 1.0, Some(&[0.19, 91.4]), &mut rng).unwrap();
+        let before = p.temperature_filter().filter().mean();
+        let cases: [(f64, f64, &[f64]); 7] = [
+            (0.05, f64::NAN, &[0.19, 91.4]),
+            (0.05, 5.5, &[0.19, 91.4]),
+            (0.05, -0.5, &[0.19, 91.4]),
+            (0.05, 1.0, &[f64::NAN, 91.4]),
+            (0.05, 1.0, &[0.19, 1.0e6]),
+            (0.05, 1.0, &[0.19]),
+            (0.0, 1.0, &[0.19, 91.4]),
+        ];
+        for (t, u, y) in cases {
+            assert!(p.step(t, u, Some(y), &mut rng).is_err(), "{t} {u} {y:?}");
+        }
+        assert!(
+            p.step(f64::INFINITY, 1.0, Some(&[0.19, 91.4]), &mut rng)
+                .is_err()
+        );
+        assert!(
+            p.step(0.05, 1.0, Some(&[0.19, 91.4, -1.0]), &mut rng)
+                .is_err()
+        );
+        assert_eq!(p.temperature_filter().filter().mean(), before);
+        // A missing sample is a documented predict-only step with a finite state.
+        let r = p.step(0.05, 1.0, None, &mut rng).unwrap();
+        assert!(r.predict_only && r.temperature.is_finite() && r.temperature_std.is_finite());
+    }
+
+    #[test]
+    fn loss_filters_learn_from_intervals_and_rul_is_finite() {
+        // Feed the loss filters exact interval consumption at a cycling temperature.
+        let (mut p, mut rng) = pipeline();
+        let (b, beta) = (37.0, 7.494e-6);
+        let mut x = 0.0;
+        for k in 0..120 {
+            let temp: f64 = 30.0 + 4.0 * (k as f64 * 0.26).sin();
+            let e = IntervalExposure::constant(240.0, temp).unwrap();
+            let c = e.consumption(b, beta);
+            x += c;
+            p.update_loss(e, c, &mut rng);
+        }
+        p.last_reading = Some(x);
+        let (b_hat, beta_hat) = p.loss_parameters();
+        assert!((b_hat - b).abs() / b < 0.05, "b {b_hat}");
+        assert!((beta_hat - beta).abs() / beta < 0.05, "beta {beta_hat}");
+        let mut states = [Vector3::zeros(); 50];
+        let mut times = [0.0; 50];
+        let mut buf = [(0.0, 0.0); 50];
+        // 1 mL more at a constant 30 degC: RUL = 1 / (beta exp(-b/30)).
+        let expected = 1.0 / (beta * (-b / 30.0f64).exp());
+        let s = p
+            .rul(
+                x + 1.0,
+                |_| 30.0,
+                3600.0,
+                200_000,
+                &mut states,
+                &mut times,
+                &mut buf,
+                &mut rng,
+            )
+            .unwrap();
+        assert!(
+            (s.median - expected).abs() / expected < 0.1,
+            "{} vs {expected}",
+            s.median
+        );
+    }
+}

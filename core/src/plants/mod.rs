@@ -1,0 +1,4 @@
+//! Estimation models of the plants the papers study.
+
+pub mod reaction_wheel;
+pub mod valve;

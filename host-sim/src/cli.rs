@@ -1,0 +1,365 @@
+//! The `prognos` command line. To add a command: add a variant to [`Command`] and a match
+//! arm in [`execute`]. To add a system: register it in [`crate::registry::Registry::builtin`].
+//!
+//! Exit status: 0 on success, 2 for a bad or unreadable input file (the message names the
+//! file, line and column), 1 for any other failure.
+
+use crate::campaign::{CampaignOptions, LAMBDAS, RunMetrics, run_campaign, simulate, write_run};
+use crate::dataio::{read_meta, read_recording};
+use crate::error::SimError;
+use crate::lockstep::replay;
+use crate::output::{fmt_num, format_table};
+use crate::registry::Registry;
+use crate::scenario::Scenario;
+use clap::{Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// Model-based prognostics: simulate, estimate, predict remaining useful life.
+#[derive(Debug, Parser)]
+#[command(name = "prognos", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run every registered system's demo scenario once: simulate a degrading system,
+    /// estimate, predict RUL, print a summary table, write CSV, JSON and plots.
+    Demo {
+        /// Output folder (one subfolder per system).
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
+        /// Only this system.
+        #[arg(long)]
+        system: Option<String>,
+        /// Skip the SVG plots.
+        #[arg(long)]
+        no_plots: bool,
+    },
+    /// Simulate one run of a scenario.
+    Run {
+        /// Scenario TOML file.
+        scenario: PathBuf,
+        /// Output folder [default: out/<scenario name>].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Which Monte-Carlo run's seed to use (run N of a campaign gives the same result).
+        #[arg(long, default_value_t = 0)]
+        run: usize,
+        /// Skip the SVG plots.
+        #[arg(long)]
+        no_plots: bool,
+    },
+    /// Run many seeds of a scenario in parallel and summarise the metrics.
+    Campaign {
+        /// Scenario TOML file.
+        scenario: PathBuf,
+        /// Number of runs [default: the scenario's `runs`].
+        #[arg(long)]
+        runs: Option<usize>,
+        /// Keep the runs a previous, interrupted campaign finished.
+        #[arg(long)]
+        resume: bool,
+        /// Output folder [default: out/campaign/<scenario name>].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads [default: all cores].
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Skip the SVG plots.
+        #[arg(long)]
+        no_plots: bool,
+        /// Never show a progress bar.
+        #[arg(long)]
+        no_progress: bool,
+    },
+    /// Run a scenario's estimator over recorded data (CSV with `t`, `u:*`, `y:*`, `x:*`).
+    Replay {
+        /// Scenario TOML file naming the system and the filter settings.
+        scenario: PathBuf,
+        /// Recorded data CSV (an optional `<file>.meta.toml` sidecar is checked).
+        data: PathBuf,
+        /// Output folder [default: out/replay/<scenario name>].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Skip the SVG plots.
+        #[arg(long)]
+        no_plots: bool,
+    },
+    /// List the registered systems.
+    Systems,
+}
+
+/// Parses the process arguments, runs the command, prints any error, returns the status.
+pub fn main_with(registry: Registry) -> ExitCode {
+    let cli = Cli::parse();
+    match execute(&registry, cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(e.exit_code() as u8)
+        }
+    }
+}
+
+/// Runs one command.
+pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
+    match command {
+        Command::Demo {
+            out,
+            system,
+            no_plots,
+        } => demo(registry, &out, system.as_deref(), !no_plots),
+        Command::Run {
+            scenario,
+            out,
+            run,
+            no_plots,
+        } => {
+            let scenario = Scenario::load(&scenario)?;
+            let out = out.unwrap_or_else(|| Path::new("out").join(&scenario.name));
+            let started = Instant::now();
+            let (record, metrics) = simulate(registry, &scenario, run)?;
+            let elapsed = started.elapsed().as_secs_f64();
+            let files = write_run(&out, &record, &metrics, scenario.alpha, !no_plots)?;
+            print!(
+                "{}",
+                metrics_table(&[(scenario.name.as_str(), &metrics, elapsed)])
+            );
+            if let Some(first) = &record.first_rejection {
+                println!(
+                    "{} samples rejected by the estimator; first: {first}",
+                    record.rejected_steps
+                );
+            }
+            print_files(&files.csv, &files.json, &files.plots);
+            Ok(())
+        }
+        Command::Campaign {
+            scenario,
+            runs,
+            resume,
+            out,
+            jobs,
+            no_plots,
+            no_progress,
+        } => {
+            let scenario = Scenario::load(&scenario)?;
+            let out_dir =
+                out.unwrap_or_else(|| Path::new("out").join("campaign").join(&scenario.name));
+            let started = Instant::now();
+            let summary = run_campaign(
+                registry,
+                &scenario,
+                &CampaignOptions {
+                    runs,
+                    out_dir: out_dir.clone(),
+                    resume,
+                    progress: !no_progress,
+                    plots: !no_plots,
+                    jobs,
+                },
+            )?;
+            let rows: Vec<Vec<String>> = summary
+                .aggregate
+                .iter()
+                .map(|(name, s)| {
+                    vec![
+                        name.clone(),
+                        s.count.to_string(),
+                        fmt_num(Some(s.mean)),
+                        fmt_num(Some(s.std)),
+                        fmt_num(Some(s.min)),
+                        fmt_num(Some(s.max)),
+                    ]
+                })
+                .collect();
+            println!(
+                "campaign `{}` ({}): {} runs ({} resumed) in {:.1} s",
+                summary.scenario,
+                summary.system,
+                summary.runs,
+                summary.resumed,
+                started.elapsed().as_secs_f64()
+            );
+            print!(
+                "{}",
+                format_table(&["metric", "runs", "mean", "std", "min", "max"], &rows)
+            );
+            println!("wrote {}", out_dir.join("summary.json").display());
+            Ok(())
+        }
+        Command::Replay {
+            scenario,
+            data,
+            out,
+            no_plots,
+        } => {
+            let scenario = Scenario::load(&scenario)?;
+            let system = registry.resolve(&scenario)?;
+            let recording = read_recording(&data)?;
+            if let Some(meta) = read_meta(&data)?
+                && meta.plant != scenario.system
+            {
+                {
+                    return Err(SimError::Run(format!(
+                        "{}: data is from plant `{}`, scenario `{}` simulates `{}`",
+                        crate::dataio::meta_path(&data).display(),
+                        meta.plant,
+                        scenario.path.display(),
+                        scenario.system
+                    )));
+                }
+            }
+            let mut sim = system.build(&scenario, scenario.run_seed(0))?;
+            let started = Instant::now();
+            let record = replay(
+                sim.estimator.as_mut(),
+                &recording,
+                &sim.inputs.input_names(),
+                &sim.sensor.channel_names(),
+                None,
+            )?;
+            let elapsed = started.elapsed().as_secs_f64();
+            let metrics = RunMetrics::from_record(0, &record, scenario.alpha);
+            let out = out.unwrap_or_else(|| Path::new("out").join("replay").join(&scenario.name));
+            let files = write_run(&out, &record, &metrics, scenario.alpha, !no_plots)?;
+            print!(
+                "{}",
+                metrics_table(&[(scenario.name.as_str(), &metrics, elapsed)])
+            );
+            print_files(&files.csv, &files.json, &files.plots);
+            Ok(())
+        }
+        Command::Systems => {
+            let rows: Vec<Vec<String>> = registry
+                .systems()
+                .map(|s| {
+                    vec![
+                        s.name().to_string(),
+                        s.demo_scenario().map_or("-".into(), |d| d.path.to_string()),
+                        s.description().to_string(),
+                    ]
+                })
+                .collect();
+            print!(
+                "{}",
+                format_table(&["system", "demo scenario", "description"], &rows)
+            );
+            Ok(())
+        }
+    }
+}
+
+/// `prognos demo`: one run of each registered system's demo scenario.
+pub fn demo(
+    registry: &Registry,
+    out: &Path,
+    only: Option<&str>,
+    plots: bool,
+) -> Result<(), SimError> {
+    if let Some(name) = only
+        && registry.get(name).is_none()
+    {
+        return Err(SimError::Run(format!("unknown system `{name}`")));
+    }
+    let mut results = Vec::new();
+    for system in registry.systems() {
+        if only.is_some_and(|n| n != system.name()) {
+            continue;
+        }
+        let Some(embedded) = system.demo_scenario() else {
+            continue;
+        };
+        let scenario = embedded.load()?;
+        let started = Instant::now();
+        let (record, metrics) = simulate(registry, &scenario, 0)?;
+        let elapsed = started.elapsed().as_secs_f64();
+        let files = write_run(
+            &out.join(system.name()),
+            &record,
+            &metrics,
+            scenario.alpha,
+            plots,
+        )?;
+        results.push((system.name(), metrics, elapsed, files));
+    }
+    if results.is_empty() {
+        return Err(SimError::Run(
+            "no registered system has a demo scenario".into(),
+        ));
+    }
+    let rows: Vec<(&str, &RunMetrics, f64)> =
+        results.iter().map(|(n, m, e, _)| (*n, m, *e)).collect();
+    print!("{}", metrics_table(&rows));
+    for (_, _, _, files) in &results {
+        print_files(&files.csv, &files.json, &files.plots);
+    }
+    Ok(())
+}
+
+/// One row per run: EOL, RUL accuracy at lambda = 0.5, alpha-lambda passes, prognostic
+/// horizon, state RMSEs, rejected samples, wall time.
+pub fn metrics_table(rows: &[(&str, &RunMetrics, f64)]) -> String {
+    let mid = LAMBDAS.iter().position(|l| *l == 0.5).unwrap_or(0);
+    let body: Vec<Vec<String>> = rows
+        .iter()
+        .map(|(name, m, seconds)| {
+            let point = m.rul.as_ref().and_then(|r| r.points.get(mid));
+            let passes = m.rul.as_ref().map_or("-".to_string(), |r| {
+                format!(
+                    "{}/{}",
+                    r.points.iter().filter(|p| p.within_alpha).count(),
+                    r.points.len()
+                )
+            });
+            let rmse = m
+                .state_rmse
+                .iter()
+                .map(|(n, v)| format!("{n}={}", fmt_num(Some(*v))))
+                .collect::<Vec<_>>()
+                .join(" ");
+            vec![
+                name.to_string(),
+                m.rows.to_string(),
+                fmt_num(m.true_eol),
+                fmt_num(point.map(|p| p.true_rul)),
+                fmt_num(point.map(|p| p.predicted_median)),
+                fmt_num(point.map(|p| p.relative_accuracy)),
+                passes,
+                fmt_num(m.rul.as_ref().and_then(|r| r.prognostic_horizon)),
+                if rmse.is_empty() { "-".into() } else { rmse },
+                m.rejected_steps.to_string(),
+                format!("{:.3}", seconds),
+            ]
+        })
+        .collect();
+    format_table(
+        &[
+            "system",
+            "samples",
+            "true EOL [s]",
+            "RUL* @0.5",
+            "RUL @0.5",
+            "RA @0.5",
+            "alpha-lambda",
+            "PH [s]",
+            "state RMSE",
+            "rejected",
+            "wall [s]",
+        ],
+        &body,
+    )
+}
+
+fn print_files(csv: &Path, json: &Path, plots: &[PathBuf]) {
+    println!("wrote {}", csv.display());
+    println!("wrote {}", json.display());
+    for p in plots {
+        println!("wrote {}", p.display());
+    }
+}
