@@ -100,9 +100,9 @@ pub enum Command {
         /// Monte-Carlo runs [default: 20].
         #[arg(long)]
         runs: Option<usize>,
-        /// Base seed.
-        #[arg(long, default_value_t = 1000)]
-        seed: u64,
+        /// Base seed [default: the seed docs/results.md was measured with].
+        #[arg(long)]
+        seed: Option<u64>,
         /// Also write the text to this file (atomically).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -291,8 +291,11 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             seed,
             out,
         } => {
-            let text =
-                crate::reproduce::reproduce(table, runs.unwrap_or(table.default_runs()), seed);
+            let text = crate::reproduce::reproduce(
+                table,
+                runs.unwrap_or(table.default_runs()),
+                seed.unwrap_or(table.default_seed()),
+            );
             print!("{text}");
             if let Some(path) = out {
                 crate::output::write_text(&path, &text)?;

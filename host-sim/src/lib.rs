@@ -7,6 +7,7 @@
 //! [`lockstep::ProfileInputs`] from the scenario, and a [`registry::System`] that builds
 //! them; then add it to [`registry::Registry::builtin`].
 
+pub mod bearing;
 pub mod campaign;
 pub mod cli;
 pub mod dataio;

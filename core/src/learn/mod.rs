@@ -1,3 +1,4 @@
-//! Identification of models of signals on board.
+//! Learned models on board: autoregressive identification and Gaussian processes.
 
 pub mod ar;
+pub mod gp;

@@ -1,0 +1,188 @@
+//! Tests of the trained GP, the GP-UKF and the IMM against known functions.
+
+use super::prognosis::BearingGp;
+use super::train::{Dataset, GP_POINTS, TrainedGp, train};
+use nalgebra::{Matrix1, SVector, Vector1, Vector2};
+use prognos_core::filter::imm::Imm;
+use prognos_core::filter::ukf::SigmaParams;
+use prognos_core::learn::gp::{GpTransition, GpUkf, StateThreshold, sample_rul};
+use prognos_core::prognose::rul_distribution;
+use prognos_core::random::{standard_normal, uniform01};
+use rand_core::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+/// Noisy samples of `r' - r = f(r, du)` over r in [0, 1.1], du in [0, 0.4].
+fn dataset(f: impl Fn(f64, f64) -> f64, noise: f64, seed: u64) -> Dataset {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut d = Dataset::default();
+    for _ in 0..GP_POINTS {
+        let r = 1.1 * uniform01::<f64, _>(&mut rng);
+        let du = 0.4 * uniform01::<f64, _>(&mut rng);
+        d.inputs.push([r, du]);
+        d.targets
+            .push(f(r, du) + noise * standard_normal::<f64, _>(&mut rng));
+    }
+    d
+}
+
+fn known(r: f64, du: f64) -> f64 {
+    0.01 + 0.02 * r * r + 0.03 * du
+}
+
+fn trained(f: impl Fn(f64, f64) -> f64, seed: u64) -> (TrainedGp, Box<BearingGp>) {
+    let gp = train(&dataset(f, 1e-4, seed), GP_POINTS).unwrap();
+    let core = gp.to_core::<GP_POINTS>().unwrap();
+    (gp, core)
+}
+
+#[test]
+fn core_gp_predictor_equals_dense_gp() {
+    let (gp, core) = trained(known, 1);
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
+    for _ in 0..50 {
+        let x = [
+            uniform01::<f64, _>(&mut rng),
+            0.4 * uniform01::<f64, _>(&mut rng),
+        ];
+        let (mean, var) = gp.predict_dense(&x);
+        let p = core.predict(&Vector2::new(x[0], x[1])).unwrap();
+        assert!(
+            (p.mean - mean).abs() < 1e-9 * (1.0 + mean.abs()),
+            "{} {mean}",
+            p.mean
+        );
+        assert!(
+            (p.latent_variance - var.max(0.0)).abs() < 1e-9 * gp.hyper.signal_variance + 1e-12,
+            "{} {var}",
+            p.latent_variance
+        );
+        // And it learned the function.
+        assert!(
+            (mean - known(x[0], x[1])).abs() < 1e-3,
+            "{mean} {}",
+            known(x[0], x[1])
+        );
+        assert!(!p.extrapolating);
+    }
+    // Far outside the training box: flagged, wider than the prior.
+    let far = core.predict(&Vector2::new(5.0, 0.1)).unwrap();
+    assert!(far.extrapolating && far.latent_variance > gp.hyper.signal_variance);
+    // The exported constants compile-round-trip as text.
+    let src = gp.to_rust_source("BEARING_GP");
+    assert!(src.contains("pub const BEARING_GP_ALPHA: [f64; 64]"));
+}
+
+#[test]
+fn gp_ukf_tracks_a_known_function_and_predicts_its_rul() {
+    let (_, gp) = trained(known, 3);
+    let std = 0.03;
+    let transition = GpTransition {
+        gps: [&*gp],
+        measurement_std: Vector1::new(std),
+    };
+    let mut f: GpUkf<f64, 1, 1, 2, GP_POINTS, 3> = GpUkf::new(
+        transition,
+        Vector1::new(0.0),
+        Matrix1::new(std * std),
+        Matrix1::new(std * std),
+        SigmaParams::default(),
+    )
+    .unwrap();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
+    let du: Vec<f64> = (0..200)
+        .map(|_| 0.4 * uniform01::<f64, _>(&mut rng))
+        .collect();
+    let mut r = 0.0;
+    let (mut se, mut n) = (0.0, 0);
+    for (k, &du_k) in du.iter().enumerate().take(25) {
+        r += known(r, du_k);
+        let z = r + std * standard_normal::<f64, _>(&mut rng);
+        f.step(&Vector1::new(du_k), &[z]).unwrap();
+        if k >= 5 {
+            se += (f.state()[0] - r).powi(2);
+            n += 1;
+        }
+    }
+    let rmse = (se / n as f64).sqrt();
+    assert!(rmse < 0.5 * std, "rmse {rmse}");
+    // True remaining cycles to r >= 1 under the same future loads.
+    let (mut rt, mut steps) = (r, 0usize);
+    while rt < 1.0 {
+        rt += known(rt, du[25 + steps]);
+        steps += 1;
+    }
+    let mut states = vec![Vector1::new(0.0); 200];
+    let mut times = vec![0.0; 200];
+    sample_rul(
+        f.transition(),
+        f.state(),
+        f.covariance(),
+        &StateThreshold {
+            index: 0,
+            level: 1.0,
+        },
+        |s| Vector1::new(du[25 + s as usize]),
+        1000,
+        &mut rng,
+        &mut states,
+        &mut times,
+    )
+    .unwrap();
+    let mut buf = vec![(0.0, 0.0); 200];
+    let s = rul_distribution(&times, &vec![1.0; 200], &mut buf).unwrap();
+    assert!(
+        (s.median - steps as f64).abs() <= 0.1 * steps as f64,
+        "median {} true {steps}",
+        s.median
+    );
+    assert!(s.p05 <= s.median && s.median <= s.p95);
+    // The truth lies within the 90 % interval (widened by the one-cycle resolution).
+    assert!(s.p05 - 1.0 <= steps as f64 && steps as f64 <= s.p95 + 1.0);
+}
+
+#[test]
+fn imm_of_gp_ukfs_picks_the_model_that_generates_the_data() {
+    let slow = |r: f64, du: f64| 0.005 + 0.005 * r + 0.01 * du;
+    let fast = |r: f64, du: f64| 0.03 + 0.01 * r + 0.01 * du;
+    let (_, gp_slow) = trained(slow, 5);
+    let (_, gp_fast) = trained(fast, 6);
+    let std = 0.01;
+    fn make(gp: &BearingGp, std: f64) -> GpUkf<'_, f64, 1, 1, 2, GP_POINTS, 3> {
+        GpUkf::new(
+            GpTransition {
+                gps: [gp],
+                measurement_std: Vector1::new(std),
+            },
+            Vector1::new(0.0),
+            Matrix1::new(std * std),
+            Matrix1::new(std * std),
+            SigmaParams::default(),
+        )
+        .unwrap()
+    }
+    let filters = [make(&gp_slow, std), make(&gp_fast, std)];
+    let mut imm = Imm::new(
+        filters,
+        SVector::from([0.5, 0.5]),
+        Imm::<f64, GpUkf<f64, 1, 1, 2, GP_POINTS, 3>, 1, 2>::uniform_switching(0.95),
+    )
+    .unwrap();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(7);
+    let mut r = 0.0;
+    let (mut right, mut counted) = (0, 0);
+    for k in 0..60 {
+        let du = 0.4 * uniform01::<f64, _>(&mut rng);
+        // Slow for 30 cycles, then fast.
+        let mode = usize::from(k >= 30);
+        r += if mode == 0 { slow(r, du) } else { fast(r, du) };
+        let z = r + std * standard_normal::<f64, _>(&mut rng);
+        let rep = imm.step(&Vector1::new(du), &[z]).unwrap();
+        if k % 30 >= 8 {
+            counted += 1;
+            if rep.probabilities[mode] > 0.8 {
+                right += 1;
+            }
+        }
+    }
+    assert!(right as f64 >= 0.9 * counted as f64, "{right} of {counted}");
+}
