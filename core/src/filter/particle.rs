@@ -318,16 +318,7 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
         M: Stochastic<T, NX, NU>,
         R: Rng + ?Sized,
     {
-        let expected = model.measurement_len();
-        if y.len() != expected {
-            return Err(Error::MeasurementLength {
-                expected,
-                got: y.len(),
-            });
-        }
-        if !all_finite(y) {
-            return Err(Error::NonFiniteMeasurement);
-        }
+        check_measurement(y, model.measurement_len())?;
         if !all_finite(u.as_slice()) {
             return Err(Error::NonFiniteInput);
         }
@@ -402,16 +393,7 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
         R: Rng + ?Sized,
     {
         if let Some(y) = y {
-            let expected = model.measurement_len();
-            if y.len() != expected {
-                return Err(Error::MeasurementLength {
-                    expected,
-                    got: y.len(),
-                });
-            }
-            if !all_finite(y) {
-                return Err(Error::NonFiniteMeasurement);
-            }
+            check_measurement(y, model.measurement_len())?;
         }
         let predict_flags = self.predict(model, u, dt, rng)?;
         let mut report = match y {
@@ -502,6 +484,20 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
             self.reset_weights();
         }
     }
+}
+
+/// A measurement must have the model's channel count and finite entries.
+fn check_measurement<T: Real>(y: &[T], expected: usize) -> Result<(), Error> {
+    if y.len() != expected {
+        return Err(Error::MeasurementLength {
+            expected,
+            got: y.len(),
+        });
+    }
+    if !all_finite(y) {
+        return Err(Error::NonFiniteMeasurement);
+    }
+    Ok(())
 }
 
 /// Clamps `x` into `[lower, upper]` entry-wise; true when anything moved.
