@@ -5,6 +5,8 @@
 //! Cortex-M4F, f64 on the host).
 #![no_std]
 #![forbid(unsafe_code)]
+// `!(a < b)` is how NaN is rejected along with out-of-range values: deliberate.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 #![cfg_attr(
     not(test),
     deny(
@@ -19,9 +21,16 @@
 extern crate std;
 
 pub mod error;
+pub mod filter;
+pub mod metrics;
 pub mod model;
+pub mod plants;
+pub mod prognose;
 pub mod random;
 pub mod real;
 
 pub use error::Error;
 pub use real::{Real, cast};
+
+pub mod safeguard;
+pub mod stats;

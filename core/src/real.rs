@@ -14,6 +14,8 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     fn as_f64(self) -> f64;
     /// True when neither NaN nor infinite.
     fn finite(self) -> bool;
+    /// True for NaN.
+    fn nan(self) -> bool;
 }
 
 impl Real for f64 {
@@ -28,6 +30,10 @@ impl Real for f64 {
     fn finite(self) -> bool {
         self.is_finite()
     }
+    #[inline]
+    fn nan(self) -> bool {
+        self.is_nan()
+    }
 }
 
 impl Real for f32 {
@@ -41,6 +47,10 @@ impl Real for f32 {
     #[inline]
     fn finite(self) -> bool {
         self.is_finite()
+    }
+    #[inline]
+    fn nan(self) -> bool {
+        self.is_nan()
     }
 }
 

@@ -1,0 +1,5 @@
+//! Recursive Bayesian filters.
+
+pub mod particle;
+pub mod resample;
+pub mod ukf;

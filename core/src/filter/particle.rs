@@ -1,0 +1,499 @@
+//! Sampling-importance-resampling (SIR) particle filter with a const-generic particle count.
+//!
+//! Weights live in the log domain and are normalised by log-sum-exp, so likelihoods never
+//! underflow; resampling happens when the effective sample size falls below a threshold; the
+//! parameter part of the state follows a random walk for joint state-parameter estimation.
+
+use super::resample::{Resampling, apply_counts, offspring_counts};
+use crate::error::{Error, check_dt};
+use crate::model::Stochastic;
+use crate::random::standard_normal;
+use crate::real::{Real, all_finite, cast};
+use crate::safeguard::{Flags, log_sum_exp};
+use crate::stats::{Summary, summarise};
+use nalgebra::{SMatrix, SVector};
+use rand_core::Rng;
+
+/// Particle-filter settings.
+#[derive(Clone, Copy, Debug)]
+pub struct PfConfig<T: Real, const NX: usize> {
+    /// Resampling scheme.
+    pub resampling: Resampling,
+    /// Resample when ESS < `resample_threshold * N` (1.0 resamples every step, as the valve paper).
+    pub resample_threshold: T,
+    /// Standard deviation of the per-step Gaussian random walk of each state entry (zero for
+    /// dynamic states; the parameter entries' walk drives joint parameter estimation).
+    pub random_walk_std: SVector<T, NX>,
+    /// Roughening constant K per entry (Gordon et al. 1993): after resampling, each entry gets
+    /// jitter of std `K * range * N^(-1/NX)`. Zero disables it for that entry.
+    pub roughening: SVector<T, NX>,
+    /// Lower bounds of the state (use `-MAX_FINITE` for none); particles are clamped into bounds.
+    pub lower: SVector<T, NX>,
+    /// Upper bounds of the state.
+    pub upper: SVector<T, NX>,
+}
+
+impl<T: Real, const NX: usize> Default for PfConfig<T, NX> {
+    fn default() -> Self {
+        Self {
+            resampling: Resampling::Systematic,
+            resample_threshold: T::one(),
+            random_walk_std: SVector::zeros(),
+            roughening: SVector::zeros(),
+            lower: SVector::repeat(-T::MAX_FINITE),
+            upper: SVector::repeat(T::MAX_FINITE),
+        }
+    }
+}
+
+impl<T: Real, const NX: usize> PfConfig<T, NX> {
+    fn validate(&self) -> Result<(), Error> {
+        if !(self.resample_threshold >= T::zero() && self.resample_threshold <= T::one()) {
+            return Err(Error::InvalidParameter("resample_threshold"));
+        }
+        let nonneg = |v: &SVector<T, NX>| v.iter().all(|s| s.finite() && *s >= T::zero());
+        if !nonneg(&self.random_walk_std) {
+            return Err(Error::InvalidParameter("random_walk_std"));
+        }
+        if !nonneg(&self.roughening) {
+            return Err(Error::InvalidParameter("roughening"));
+        }
+        if self
+            .lower
+            .iter()
+            .zip(self.upper.iter())
+            .any(|(l, u)| !(l <= u))
+        {
+            return Err(Error::InvalidParameter("lower/upper bounds"));
+        }
+        Ok(())
+    }
+}
+
+/// What one filter step did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PfReport<T> {
+    /// Effective sample size after the weight update, before any resampling.
+    pub ess: T,
+    /// The measurement was used to reweight the particles.
+    pub fused: bool,
+    /// `ln sum_i w_i p(y | x_i)`: the log evidence of the measurement (consistency monitors
+    /// and gap diagnosis use it); `-inf` when the measurement was not fused.
+    pub log_evidence: T,
+    /// Largest single-particle log-likelihood.
+    pub max_log_likelihood: T,
+    /// Safeguards and actions taken (resampling, roughening, recoveries).
+    pub flags: Flags,
+}
+
+/// SIR particle filter over `N` particles of an `NX`-dimensional state.
+///
+/// Size: `N * (NX + 3) * size_of::<T>()` bytes plus the config (e.g. 14 states, N = 500, f64:
+/// about 68 KiB). On a microcontroller keep it in a `static`.
+#[derive(Clone, Debug)]
+pub struct ParticleFilter<T: Real, const NX: usize, const N: usize> {
+    particles: [SVector<T, NX>; N],
+    log_weights: [T; N],
+    scratch: [T; N],
+    counts: [u32; N],
+    config: PfConfig<T, NX>,
+}
+
+impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
+    const NONEMPTY: () = assert!(N > 0 && NX > 0, "need at least one particle and one state");
+
+    /// A filter with all particles at `x0` and uniform weights.
+    pub fn new(x0: SVector<T, NX>, config: PfConfig<T, NX>) -> Result<Self, Error> {
+        let () = Self::NONEMPTY;
+        config.validate()?;
+        if !all_finite(x0.as_slice()) {
+            return Err(Error::InvalidParameter("x0"));
+        }
+        let uniform = -cast::<T>(N as f64).ln();
+        Ok(Self {
+            particles: [x0; N],
+            log_weights: [uniform; N],
+            scratch: [T::zero(); N],
+            counts: [0; N],
+            config,
+        })
+    }
+
+    /// Re-initialises particles from independent Gaussians `mean + std * z`, clamped to the
+    /// bounds, with uniform weights.
+    pub fn init_gaussian<R: Rng + ?Sized>(
+        &mut self,
+        mean: &SVector<T, NX>,
+        std: &SVector<T, NX>,
+        rng: &mut R,
+    ) -> Result<(), Error> {
+        if !all_finite(mean.as_slice()) || !std.iter().all(|s| s.finite() && *s >= T::zero()) {
+            return Err(Error::InvalidParameter("initial mean/std"));
+        }
+        let (lower, upper) = (self.config.lower, self.config.upper);
+        for p in self.particles.iter_mut() {
+            for ((x, m), s) in p.iter_mut().zip(mean.iter()).zip(std.iter()) {
+                *x = *m + *s * standard_normal::<T, R>(rng);
+            }
+            clamp_into(p, &lower, &upper);
+        }
+        self.reset_weights();
+        Ok(())
+    }
+
+    /// Re-initialises particle `i` from `init(i, rng)`, with uniform weights. A non-finite
+    /// particle is an error and leaves the earlier particles replaced (call again to retry).
+    pub fn init_with<R: Rng + ?Sized>(
+        &mut self,
+        rng: &mut R,
+        mut init: impl FnMut(usize, &mut R) -> SVector<T, NX>,
+    ) -> Result<(), Error> {
+        for (i, p) in self.particles.iter_mut().enumerate() {
+            let x = init(i, rng);
+            if !all_finite(x.as_slice()) {
+                return Err(Error::InvalidParameter("initial particle"));
+            }
+            *p = x;
+        }
+        self.reset_weights();
+        Ok(())
+    }
+
+    fn reset_weights(&mut self) {
+        let uniform = -cast::<T>(N as f64).ln();
+        self.log_weights = [uniform; N];
+    }
+
+    /// The particles.
+    pub fn particles(&self) -> &[SVector<T, NX>; N] {
+        &self.particles
+    }
+
+    /// Mutable access to the particles (for model-specific projections); weights are kept.
+    pub fn particles_mut(&mut self) -> &mut [SVector<T, NX>; N] {
+        &mut self.particles
+    }
+
+    /// Normalised log-weights (their log-sum-exp is 0).
+    pub fn log_weights(&self) -> &[T; N] {
+        &self.log_weights
+    }
+
+    /// Normalised linear weight of particle `i` (0 for an index out of range).
+    pub fn weight(&self, i: usize) -> T {
+        self.log_weights.get(i).map_or(T::zero(), |lw| lw.exp())
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PfConfig<T, NX> {
+        &self.config
+    }
+
+    /// Replaces the configuration (validated; unchanged on error).
+    pub fn set_config(&mut self, config: PfConfig<T, NX>) -> Result<(), Error> {
+        config.validate()?;
+        self.config = config;
+        Ok(())
+    }
+
+    /// Effective sample size `1 / sum w_i^2`.
+    pub fn ess(&self) -> T {
+        let s = self.log_weights.iter().fold(T::zero(), |a, &lw| {
+            let w = lw.exp();
+            a + w * w
+        });
+        if s > T::zero() {
+            T::one() / s
+        } else {
+            T::zero()
+        }
+    }
+
+    /// Weighted mean of the particles.
+    pub fn mean(&self) -> SVector<T, NX> {
+        let mut m = SVector::<T, NX>::zeros();
+        for (p, lw) in self.particles.iter().zip(self.log_weights.iter()) {
+            m += p * lw.exp();
+        }
+        m
+    }
+
+    /// Weighted covariance of the particles.
+    pub fn covariance(&self) -> SMatrix<T, NX, NX> {
+        let m = self.mean();
+        let mut c = SMatrix::<T, NX, NX>::zeros();
+        for (p, lw) in self.particles.iter().zip(self.log_weights.iter()) {
+            let d = p - m;
+            c += d * d.transpose() * lw.exp();
+        }
+        c
+    }
+
+    /// Weighted summary (mean, median, percentiles, RMAD) of state entry `index`, using the
+    /// caller's buffer (no allocation). `None` for a bad index.
+    pub fn summary_of(&self, index: usize, buf: &mut [(T, T); N]) -> Option<Summary<T>> {
+        if index >= NX {
+            return None;
+        }
+        for ((slot, p), lw) in buf
+            .iter_mut()
+            .zip(self.particles.iter())
+            .zip(&self.log_weights)
+        {
+            *slot = (p.get(index).copied().unwrap_or_else(T::zero), lw.exp());
+        }
+        summarise(buf)
+    }
+
+    /// Prediction: propagates every particle through the model with process noise and the
+    /// parameter random walk. Errors (bad `u` or `dt`) leave the filter unchanged. A particle
+    /// whose new state is non-finite keeps its old state and loses its weight (flagged); if
+    /// every particle diverges the step is discarded with [`Error::NonFiniteState`].
+    pub fn predict<M, R, const NU: usize>(
+        &mut self,
+        model: &M,
+        u: &SVector<T, NU>,
+        dt: T,
+        rng: &mut R,
+    ) -> Result<Flags, Error>
+    where
+        M: Stochastic<T, NX, NU>,
+        R: Rng + ?Sized,
+    {
+        check_dt(dt)?;
+        if !all_finite(u.as_slice()) {
+            return Err(Error::NonFiniteInput);
+        }
+        let mut flags = Flags::NONE;
+        let mut survivors = 0usize;
+        let (walk, lower, upper) = (
+            self.config.random_walk_std,
+            self.config.lower,
+            self.config.upper,
+        );
+        for (p, ok) in self.particles.iter_mut().zip(self.scratch.iter_mut()) {
+            let mut next = model.sample_step(p, u, dt, rng);
+            for (x, s) in next.iter_mut().zip(walk.iter()) {
+                if *s > T::zero() {
+                    *x += *s * standard_normal::<T, R>(rng);
+                }
+            }
+            if clamp_into(&mut next, &lower, &upper) {
+                flags.insert(Flags::BOUNDS_CLAMPED);
+            }
+            if all_finite(next.as_slice()) {
+                *p = next;
+                *ok = T::zero();
+                survivors += 1;
+            } else {
+                *ok = T::min_value().unwrap_or(-T::MAX_FINITE);
+            }
+        }
+        if survivors == 0 {
+            return Err(Error::NonFiniteState);
+        }
+        if survivors < N {
+            flags.insert(Flags::NONFINITE_PARTICLES_DROPPED);
+            for (lw, penalty) in self.log_weights.iter_mut().zip(self.scratch.iter()) {
+                *lw += *penalty;
+            }
+            self.normalise();
+        }
+        Ok(flags)
+    }
+
+    /// Measurement update: reweights by `ln p(y | x_i)` and resamples when the ESS is low.
+    /// A measurement of the wrong length or with a non-finite entry is an error and leaves the
+    /// filter unchanged. If every particle's likelihood is zero the measurement is skipped (the
+    /// step becomes predict-only) and [`Flags::WEIGHT_COLLAPSE_RECOVERED`] is set.
+    pub fn update<M, R, const NU: usize>(
+        &mut self,
+        model: &M,
+        u: &SVector<T, NU>,
+        y: &[T],
+        rng: &mut R,
+    ) -> Result<PfReport<T>, Error>
+    where
+        M: Stochastic<T, NX, NU>,
+        R: Rng + ?Sized,
+    {
+        let expected = model.measurement_len();
+        if y.len() != expected {
+            return Err(Error::MeasurementLength {
+                expected,
+                got: y.len(),
+            });
+        }
+        if !all_finite(y) {
+            return Err(Error::NonFiniteMeasurement);
+        }
+        if !all_finite(u.as_slice()) {
+            return Err(Error::NonFiniteInput);
+        }
+        let neg_inf = T::min_value().unwrap_or(-T::MAX_FINITE);
+        // A true -inf (not -MAX_FINITE): a zero likelihood must stay zero in the sums below.
+        let zero_likelihood: T = cast(f64::NEG_INFINITY);
+        let mut max_ll = neg_inf;
+        let mut max_total = zero_likelihood;
+        for ((p, ll), lw) in self
+            .particles
+            .iter()
+            .zip(self.scratch.iter_mut())
+            .zip(&self.log_weights)
+        {
+            let l = model.log_likelihood(p, u, y);
+            // NaN likelihoods (a model bug or an impossible state) count as zero likelihood.
+            let l = if l.nan() { zero_likelihood } else { l };
+            let total = *lw + l;
+            // -inf + inf is NaN: also a zero.
+            *ll = if total.nan() { zero_likelihood } else { total };
+            if l > max_ll {
+                max_ll = l;
+            }
+            if *ll > max_total {
+                max_total = *ll;
+            }
+        }
+        let mut report = PfReport {
+            ess: T::zero(),
+            fused: false,
+            log_evidence: neg_inf,
+            max_log_likelihood: max_ll,
+            flags: Flags::NONE,
+        };
+        if !max_total.finite() {
+            report.flags.insert(Flags::WEIGHT_COLLAPSE_RECOVERED);
+            report.ess = self.ess();
+            return Ok(report);
+        }
+        // Shift by the largest term before the log-sum-exp: with log-likelihoods of -1e300 the
+        // particles' differences would otherwise be absorbed and the weights not sum to one.
+        for s in self.scratch.iter_mut() {
+            *s -= max_total;
+        }
+        let log_sum = log_sum_exp(&self.scratch);
+        for (lw, s) in self.log_weights.iter_mut().zip(self.scratch.iter()) {
+            *lw = *s - log_sum;
+        }
+        let log_evidence = max_total + log_sum;
+        report.fused = true;
+        report.log_evidence = log_evidence;
+        report.ess = self.ess();
+        if report.ess < self.config.resample_threshold * cast(N as f64) {
+            report.flags.insert(self.resample(rng));
+        }
+        Ok(report)
+    }
+
+    /// One full step: predict over `dt`, then update with `y` if present (`None` is a
+    /// predict-only step, e.g. for a missing sample). Validates everything before changing
+    /// anything, so an error leaves the filter unchanged.
+    pub fn step<M, R, const NU: usize>(
+        &mut self,
+        model: &M,
+        u: &SVector<T, NU>,
+        y: Option<&[T]>,
+        dt: T,
+        rng: &mut R,
+    ) -> Result<PfReport<T>, Error>
+    where
+        M: Stochastic<T, NX, NU>,
+        R: Rng + ?Sized,
+    {
+        if let Some(y) = y {
+            let expected = model.measurement_len();
+            if y.len() != expected {
+                return Err(Error::MeasurementLength {
+                    expected,
+                    got: y.len(),
+                });
+            }
+            if !all_finite(y) {
+                return Err(Error::NonFiniteMeasurement);
+            }
+        }
+        let predict_flags = self.predict(model, u, dt, rng)?;
+        let mut report = match y {
+            Some(y) => self.update(model, u, y, rng)?,
+            None => PfReport {
+                ess: self.ess(),
+                log_evidence: T::min_value().unwrap_or(-T::MAX_FINITE),
+                max_log_likelihood: T::min_value().unwrap_or(-T::MAX_FINITE),
+                ..PfReport::default()
+            },
+        };
+        report.flags.insert(predict_flags);
+        Ok(report)
+    }
+
+    /// Resamples now with the configured scheme (uniform weights afterwards), then roughens.
+    pub fn resample<R: Rng + ?Sized>(&mut self, rng: &mut R) -> Flags {
+        for (w, lw) in self.scratch.iter_mut().zip(self.log_weights.iter()) {
+            *w = lw.exp();
+        }
+        offspring_counts(self.config.resampling, &self.scratch, &mut self.counts, rng);
+        apply_counts(&mut self.particles, &self.counts);
+        self.reset_weights();
+        let mut flags = Flags::RESAMPLED;
+        if self.roughen(rng) {
+            flags.insert(Flags::ROUGHENED);
+        }
+        flags
+    }
+
+    /// Roughening: Gaussian jitter proportional to each entry's particle range.
+    fn roughen<R: Rng + ?Sized>(&mut self, rng: &mut R) -> bool {
+        if self.config.roughening.iter().all(|k| *k == T::zero()) {
+            return false;
+        }
+        let mut lo = SVector::<T, NX>::repeat(T::MAX_FINITE);
+        let mut hi = SVector::<T, NX>::repeat(-T::MAX_FINITE);
+        for p in self.particles.iter() {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        let shrink = cast::<T>(N as f64).powf(-T::one() / cast(NX as f64));
+        let std = (hi - lo).component_mul(&self.config.roughening) * shrink;
+        let (lower, upper) = (self.config.lower, self.config.upper);
+        for p in self.particles.iter_mut() {
+            for (x, s) in p.iter_mut().zip(std.iter()) {
+                if *s > T::zero() {
+                    *x += *s * standard_normal::<T, R>(rng);
+                }
+            }
+            clamp_into(p, &lower, &upper);
+        }
+        true
+    }
+
+    fn normalise(&mut self) {
+        let total = log_sum_exp(&self.log_weights);
+        if total.finite() {
+            for lw in self.log_weights.iter_mut() {
+                *lw -= total;
+            }
+        } else {
+            self.reset_weights();
+        }
+    }
+}
+
+/// Clamps `x` into `[lower, upper]` entry-wise; true when anything moved.
+fn clamp_into<T: Real, const NX: usize>(
+    x: &mut SVector<T, NX>,
+    lower: &SVector<T, NX>,
+    upper: &SVector<T, NX>,
+) -> bool {
+    let mut moved = false;
+    for ((v, l), u) in x.iter_mut().zip(lower.iter()).zip(upper.iter()) {
+        if *v < *l {
+            *v = *l;
+            moved = true;
+        } else if *v > *u {
+            *v = *u;
+            moved = true;
+        }
+    }
+    moved
+}

@@ -1,0 +1,3 @@
+//! Estimation models of the plants the papers study.
+
+pub mod valve;
