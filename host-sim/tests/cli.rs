@@ -114,8 +114,8 @@ fn campaign_rul_accuracy_and_calibration_are_sensible() {
     let summary = campaign(&dir, 24, 2, false);
     let a = &summary.aggregate;
     // Relative accuracy of the median RUL halfway to EOL, and the alpha-lambda pass rate
-    // (alpha = 0.2); a 200-run campaign gives 0.907 and 0.894.
-    assert!(a["ra@0.5"].mean > 0.85, "{:?}", a["ra@0.5"]);
+    // (alpha = 0.2); a 200-run campaign gives 90.7% and 0.894.
+    assert!(a["ra@0.5"].mean > 85.0, "{:?}", a["ra@0.5"]);
     assert!(
         a["alpha_lambda@0.5"].mean >= 0.75,
         "{:?}",
