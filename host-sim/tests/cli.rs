@@ -481,3 +481,71 @@ fn replay_of_a_lockstep_log_reproduces_the_estimates_and_bad_csv_exits_2() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn core_particle_filter_agrees_with_the_exact_kalman_filter() {
+    let registry = Registry::builtin();
+    let load = |name: &str| {
+        Scenario::load(
+            &Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("scenarios")
+                .join(name),
+        )
+        .unwrap()
+    };
+    let (kf_scenario, pf_scenario) = (
+        load("linear_degradation.toml"),
+        load("linear_degradation_pf.toml"),
+    );
+    for run in 0..3 {
+        let (kf, kf_metrics) =
+            prognos_sim::campaign::simulate(&registry, &kf_scenario, run).unwrap();
+        let (pf, pf_metrics) =
+            prognos_sim::campaign::simulate(&registry, &pf_scenario, run).unwrap();
+        // Same seed, same truth and measurements: the estimator has its own random stream.
+        assert_eq!(kf.series.column("x:damage"), pf.series.column("x:damage"));
+        assert_eq!(kf.series.column("y:damage"), pf.series.column("y:damage"));
+        let col = |r: &prognos_sim::lockstep::RunRecord, n: &str| r.series.column(n).unwrap();
+        let (kd, pd, ksd) = (
+            col(&kf, "est:damage"),
+            col(&pf, "est:damage"),
+            col(&kf, "est_sd:damage"),
+        );
+        let n = kd.len() as f64;
+        let rms_diff = (kd
+            .iter()
+            .zip(&pd)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        let mean_sd = ksd.iter().sum::<f64>() / n;
+        assert!(
+            rms_diff < 0.5 * mean_sd,
+            "run {run}: damage rms diff {rms_diff} vs sd {mean_sd}"
+        );
+        let (kr, pr, krs) = (
+            *col(&kf, "est:rate").last().unwrap(),
+            *col(&pf, "est:rate").last().unwrap(),
+            *col(&kf, "est_sd:rate").last().unwrap(),
+        );
+        // The rate is a static parameter the PF only keeps alive by roughening, so its
+        // posterior is an approximation: allow 4 Kalman standard deviations.
+        assert!(
+            (kr - pr).abs() < 4.0 * krs,
+            "run {run}: rate {pr} vs Kalman {kr} +- {krs}"
+        );
+        let ra = |m: &RunMetrics| m.rul.as_ref().unwrap().points[1].relative_accuracy;
+        assert!(
+            ra(&pf_metrics) > 75.0,
+            "run {run}: PF RA@0.5 {}",
+            ra(&pf_metrics)
+        );
+        assert!(
+            (ra(&pf_metrics) - ra(&kf_metrics)).abs() < 15.0,
+            "run {run}: RA@0.5 PF {} vs KF {}",
+            ra(&pf_metrics),
+            ra(&kf_metrics)
+        );
+    }
+}
