@@ -1,8 +1,9 @@
 //! Single runs and Monte-Carlo campaigns: simulate, score, and write CSV, JSON and plots.
 //!
-//! The metrics here are a small host-side set (state RMSE and 2-sd coverage, relative
-//! accuracy and alpha-lambda at lambda = 0.25/0.5/0.75, prognostic horizon) computed from
-//! the run log; they give way to `prognos_core::metrics` once that lands on main.
+//! Scores come from the run log: state RMSE and +-2 sd coverage against the truth, and the
+//! RUL scores of `prognos_core::metrics` (relative accuracy and alpha-lambda at
+//! lambda = 0.25/0.5/0.75, alpha accuracy over all predictions, prognostic horizon, MAPE,
+//! average bias).
 
 use crate::dataio::read_series;
 use crate::error::SimError;
@@ -48,6 +49,12 @@ pub struct RulMetrics {
     /// `EOL - t` of the earliest prediction after which every prediction stays within
     /// `+- alpha * EOL` of the true RUL; `None` if the last prediction is outside.
     pub prognostic_horizon: Option<f64>,
+    /// Fraction of all predictions before EOL within `(1 +- alpha) RUL*`.
+    pub alpha_accuracy: f64,
+    /// Mean absolute percentage error of the median over all predictions before EOL.
+    pub mape: Option<f64>,
+    /// Mean of `RUL* - RUL` (positive: predicted failure too early).
+    pub average_bias: Option<f64>,
 }
 
 /// The prediction at `t_lambda = t_p + lambda (EOL - t_p)`.
@@ -57,7 +64,7 @@ pub struct LambdaPoint {
     pub t: f64,
     pub true_rul: f64,
     pub predicted_median: f64,
-    /// `1 - |RUL* - RUL| / RUL*`.
+    /// `100 (1 - |RUL* - RUL| / RUL*)`, percent.
     pub relative_accuracy: f64,
     /// Median within `(1 +- alpha) RUL*`.
     pub within_alpha: bool,
@@ -132,57 +139,68 @@ impl RunMetrics {
                 "prognostic_horizon".into(),
                 r.prognostic_horizon.unwrap_or(0.0),
             ));
+            out.push(("alpha_accuracy".into(), r.alpha_accuracy));
+            if let Some(v) = r.mape {
+                out.push(("rul_mape".into(), v));
+            }
+            if let Some(v) = r.average_bias {
+                out.push(("rul_average_bias".into(), v));
+            }
         }
         out
     }
 }
 
 fn rul_metrics(record: &RunRecord, eol: f64, alpha: f64) -> Option<RulMetrics> {
+    use prognos_core::metrics;
     let s = &record.series;
     let t = s.column("t")?;
     let median = s.column("rul:median")?;
     // Rows with a prediction made before EOL.
-    let predictions: Vec<(f64, f64)> = t
+    let (times, predicted): (Vec<f64>, Vec<f64>) = t
         .iter()
         .zip(&median)
         .filter(|(ti, m)| m.is_finite() && **ti < eol)
         .map(|(&ti, &m)| (ti, m))
-        .collect();
-    let &(t_p, _) = predictions.first()?;
+        .unzip();
+    let true_rul: Vec<f64> = times.iter().map(|ti| eol - ti).collect();
+    let t_p = *times.first()?;
     let points = LAMBDAS
         .iter()
         .filter_map(|&lambda| {
             let t_lambda = t_p + lambda * (eol - t_p);
             // The latest prediction made at or before t_lambda.
-            let &(ti, m) = predictions
+            let i = times
                 .iter()
-                .take_while(|(ti, _)| *ti <= t_lambda + 1e-9)
-                .last()?;
-            let true_rul = eol - ti;
+                .take_while(|ti| **ti <= t_lambda + 1e-9)
+                .count();
+            let i = i.checked_sub(1)?;
+            let (ti, m, r) = (times[i], predicted[i], true_rul[i]);
             Some(LambdaPoint {
                 lambda,
                 t: ti,
-                true_rul,
+                true_rul: r,
                 predicted_median: m,
-                relative_accuracy: 1.0 - (true_rul - m).abs() / true_rul,
-                within_alpha: (m - true_rul).abs() <= alpha * true_rul,
+                relative_accuracy: metrics::relative_accuracy(r, m)?,
+                within_alpha: metrics::within_alpha(r, m, alpha),
             })
         })
         .collect();
-    let bound = alpha * eol;
-    let mut horizon = None;
-    for &(ti, m) in predictions.iter().rev() {
-        if (m - (eol - ti)).abs() <= bound {
-            horizon = Some(eol - ti);
-        } else {
-            break;
-        }
-    }
     Some(RulMetrics {
         alpha,
         first_prediction: t_p,
         points,
-        prognostic_horizon: horizon,
+        prognostic_horizon: metrics::prognostic_horizon(
+            &times,
+            &true_rul,
+            &predicted,
+            eol,
+            alpha,
+            metrics::HorizonBand::FractionOfEol,
+        ),
+        alpha_accuracy: metrics::alpha_lambda_accuracy(&true_rul, &predicted, alpha)?,
+        mape: metrics::mean_absolute_percentage_error(&true_rul, &predicted),
+        average_bias: metrics::average_bias(&true_rul, &predicted),
     })
 }
 
@@ -457,4 +475,57 @@ pub fn run_campaign(
     }
     write_json(&out.join("summary.json"), &summary)?;
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dataio::TimeSeries;
+
+    #[test]
+    fn rul_scores_of_a_known_prediction_sequence() {
+        // EOL at t = 100; predictions every 10 s from t = 10, 10% late (RUL over-predicted)
+        // until t = 40, then exact.
+        let mut series = TimeSeries::new(
+            ["t", "x:d", "est:d", "est_sd:d", "rul:median", "rul:true"]
+                .map(String::from)
+                .to_vec(),
+        );
+        for k in 0..=100 {
+            let t = k as f64;
+            let true_rul = 100.0 - t;
+            let median = if k % 10 != 0 || k == 0 {
+                f64::NAN
+            } else if t <= 40.0 {
+                1.1 * true_rul
+            } else {
+                true_rul
+            };
+            series.rows.push(vec![t, t, t + 0.5, 1.0, median, true_rul]);
+        }
+        let record = RunRecord {
+            series,
+            true_eol: Some(100.0),
+            rejected_steps: 0,
+            first_rejection: None,
+            seed: 1,
+        };
+        let m = RunMetrics::from_record(0, &record, 0.05);
+        assert!((m.state_rmse["d"] - 0.5).abs() < 1e-12);
+        assert_eq!(m.state_coverage_2sd["d"], 1.0);
+        let r = m.rul.unwrap();
+        assert_eq!(r.first_prediction, 10.0);
+        // t_lambda = 10 + lambda * 90: 32.5 -> prediction at 30; 55 -> 50; 77.5 -> 70.
+        let at: Vec<f64> = r.points.iter().map(|p| p.t).collect();
+        assert_eq!(at, vec![30.0, 50.0, 70.0]);
+        assert!((r.points[0].relative_accuracy - 90.0).abs() < 1e-9);
+        assert!(!r.points[0].within_alpha && r.points[1].within_alpha);
+        assert!((r.points[1].relative_accuracy - 100.0).abs() < 1e-9);
+        // Band +-0.05 * 100 = 5: the 10% errors at t = 10..40 are 9, 8, 7, 6 > 5, so the
+        // horizon starts at t = 50.
+        assert_eq!(r.prognostic_horizon, Some(50.0));
+        // 5 of 9 predictions (t = 50..90) are within 5% of RUL*.
+        assert!((r.alpha_accuracy - 5.0 / 9.0).abs() < 1e-12);
+        assert!((r.mape.unwrap() - 40.0 / 9.0).abs() < 1e-9);
+    }
 }

@@ -1,10 +1,12 @@
 //! A small, exactly solvable test system that exercises the whole host machinery before the
 //! paper systems land: scalar damage growing linearly under a load input,
 //! `d_{k+1} = d_k + r u_k dt + q sqrt(dt) w_k`, measured with Gaussian noise, end of life
-//! when `d >= threshold`. The estimator is an exact two-state Kalman filter on `(d, r)`
-//! (the rate is unknown and tracked as a random walk); the RUL distribution comes from
-//! the Gaussian predictive distribution of `d` at each future time (see
-//! `docs/deviations.md`, "host-sim linear degradation").
+//! when `d >= threshold`. Two estimators of `(d, r)` (the rate is unknown):
+//! - `kind = "kalman"`: an exact two-state Kalman filter; the RUL distribution comes from the
+//!   Gaussian predictive distribution of `d` at each future time (see `docs/deviations.md`,
+//!   "host-sim linear degradation").
+//! - `kind = "particle"`: the core's SIR particle filter with [`PARTICLES`] particles and
+//!   the core's EOL prediction (`prognose::predict_eol`) under the mean past load.
 
 use crate::error::SimError;
 use crate::lockstep::{
@@ -13,7 +15,24 @@ use crate::lockstep::{
 };
 use crate::registry::{EmbeddedScenario, System};
 use crate::scenario::Scenario;
+use nalgebra::{SVector, Vector1, Vector2};
+use prognos_core::filter::particle::{ParticleFilter, PfConfig};
+use prognos_core::model::{Model, Stochastic, gaussian_log_likelihood};
+use prognos_core::prognose::{EndOfLife, PredictionSettings, predict_eol, rul_distribution};
+use rand_core::Rng;
 use serde::Deserialize;
+
+/// Particle count of the particle-filter estimator.
+pub const PARTICLES: usize = 300;
+
+/// Which estimator the scenario's `[filter]` asks for.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FilterKind {
+    #[default]
+    Kalman,
+    Particle,
+}
 
 /// The registry entry.
 pub struct LinearDegradation;
@@ -50,6 +69,8 @@ impl Default for PlantSettings {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct FilterSettings {
+    /// `"kalman"` (default) or `"particle"`.
+    pub kind: FilterKind,
     pub initial_damage: f64,
     pub initial_damage_std: f64,
     pub initial_rate: f64,
@@ -68,11 +89,17 @@ pub struct FilterSettings {
     pub horizon: f64,
     /// Load assumed for the future; absent = the mean of the loads seen so far.
     pub future_load: Option<f64>,
+    /// Particle filter only: step of the EOL prediction, seconds.
+    pub prediction_dt: f64,
+    /// Particle filter only: roughening constant of the rate (Gordon et al.), which keeps
+    /// the static rate from collapsing onto a few particles.
+    pub roughening: f64,
 }
 
 impl Default for FilterSettings {
     fn default() -> Self {
         FilterSettings {
+            kind: FilterKind::Kalman,
             initial_damage: 0.0,
             initial_damage_std: 0.05,
             initial_rate: 0.002,
@@ -84,6 +111,8 @@ impl Default for FilterSettings {
             predict_every: 10,
             horizon: 10_000.0,
             future_load: None,
+            prediction_dt: 5.0,
+            roughening: 0.1,
         }
     }
 }
@@ -280,6 +309,173 @@ impl Estimator for LinearKalman {
     }
 }
 
+/// The estimation model of the particle filter: `x = (d, r)`, `u = (load)`.
+#[derive(Clone, Copy, Debug)]
+pub struct LinearModel {
+    pub process_noise_std: f64,
+    pub measurement_std: f64,
+    pub threshold: f64,
+}
+
+impl Model<f64, 2, 1> for LinearModel {
+    fn step(&self, x: &Vector2<f64>, u: &Vector1<f64>, dt: f64) -> Vector2<f64> {
+        Vector2::new(x[0] + x[1] * u[0] * dt, x[1])
+    }
+}
+
+impl Stochastic<f64, 2, 1> for LinearModel {
+    fn measurement_len(&self) -> usize {
+        1
+    }
+    fn sample_step<R: Rng + ?Sized>(
+        &self,
+        x: &Vector2<f64>,
+        u: &Vector1<f64>,
+        dt: f64,
+        rng: &mut R,
+    ) -> Vector2<f64> {
+        let mut next = self.step(x, u, dt);
+        next[0] += self.process_noise_std
+            * dt.sqrt()
+            * prognos_core::random::standard_normal::<f64, R>(rng);
+        next
+    }
+    fn log_likelihood(&self, x: &Vector2<f64>, _u: &Vector1<f64>, y: &[f64]) -> f64 {
+        gaussian_log_likelihood(y, &[x[0]], &[self.measurement_std])
+    }
+}
+
+impl EndOfLife<f64, 2> for LinearModel {
+    fn reached(&self, x: &Vector2<f64>) -> bool {
+        x[0] >= self.threshold
+    }
+}
+
+/// The core's particle filter and EOL prediction on [`LinearModel`].
+pub struct LinearParticle {
+    pf: Box<ParticleFilter<f64, 2, PARTICLES>>,
+    model: LinearModel,
+    rng: SimRng,
+    last_t: Option<f64>,
+    samples: usize,
+    load_sum: f64,
+    settings: FilterSettings,
+}
+
+impl LinearParticle {
+    /// `dt` is the scenario's sample time (the random walk and roughening are per step).
+    pub fn new(
+        settings: FilterSettings,
+        dt: f64,
+        mut rng: SimRng,
+    ) -> Result<Self, prognos_core::Error> {
+        let config = PfConfig {
+            random_walk_std: SVector::from([0.0, settings.rate_walk_std * dt.sqrt()]),
+            roughening: SVector::from([0.0, settings.roughening]),
+            lower: SVector::from([f64::MIN, 0.0]),
+            ..PfConfig::default()
+        };
+        let mean = Vector2::new(settings.initial_damage, settings.initial_rate);
+        let mut pf = Box::new(ParticleFilter::new(mean, config)?);
+        pf.init_gaussian(
+            &mean,
+            &Vector2::new(settings.initial_damage_std, settings.initial_rate_std),
+            &mut rng,
+        )?;
+        Ok(LinearParticle {
+            pf,
+            model: LinearModel {
+                process_noise_std: settings.process_noise_std,
+                measurement_std: settings.measurement_std,
+                threshold: settings.threshold,
+            },
+            rng,
+            last_t: None,
+            samples: 0,
+            load_sum: 0.0,
+            settings,
+        })
+    }
+
+    fn predict_rul(&mut self, load: f64) -> Option<RulSummary> {
+        let s = &self.settings;
+        let settings = PredictionSettings {
+            dt: s.prediction_dt,
+            max_steps: (s.horizon / s.prediction_dt).ceil() as u32,
+            process_noise: true,
+            random_walk_std: SVector::from([0.0, s.rate_walk_std * s.prediction_dt.sqrt()]),
+        };
+        let mut times = [0.0; PARTICLES];
+        // Every particle past the horizon is reported as the horizon (censored), the same
+        // convention as the Kalman estimator.
+        let _ = predict_eol(
+            &self.model,
+            &self.model,
+            self.pf.particles(),
+            |_| Vector1::new(load),
+            &settings,
+            &mut self.rng,
+            &mut times,
+        );
+        for t in &mut times {
+            *t = t.min(s.horizon);
+        }
+        let weights: Vec<f64> = (0..PARTICLES).map(|i| self.pf.weight(i)).collect();
+        let mut buf = [(0.0, 0.0); PARTICLES];
+        let summary = rul_distribution(&times, &weights, &mut buf)?;
+        Some(RulSummary {
+            mean: summary.mean,
+            median: summary.median,
+            lower: summary.p05,
+            upper: summary.p95,
+        })
+    }
+}
+
+impl Estimator for LinearParticle {
+    fn estimate_names(&self) -> Vec<String> {
+        vec!["damage".into(), "rate".into()]
+    }
+
+    fn step(&mut self, t: f64, u: &[f64], y: &[f64]) -> Result<EstimatorStep, prognos_core::Error> {
+        use prognos_core::Error;
+        let load = *u.first().ok_or(Error::InputLength {
+            expected: 1,
+            got: 0,
+        })?;
+        let u = Vector1::new(load);
+        match self.last_t {
+            None => {
+                self.pf.update(&self.model, &u, y, &mut self.rng)?;
+            }
+            Some(last) => {
+                self.pf
+                    .step(&self.model, &u, Some(y), t - last, &mut self.rng)?;
+            }
+        }
+        self.last_t = Some(t);
+        self.samples += 1;
+        self.load_sum += load;
+        let mean = self.pf.mean();
+        let cov = self.pf.covariance();
+        let every = self.settings.predict_every;
+        let rul = if every > 0 && (self.samples - 1).is_multiple_of(every) {
+            let future = self
+                .settings
+                .future_load
+                .unwrap_or(self.load_sum / self.samples as f64);
+            self.predict_rul(future)
+        } else {
+            None
+        };
+        Ok(EstimatorStep {
+            mean: vec![mean[0], mean[1]],
+            std: vec![cov[(0, 0)].max(0.0).sqrt(), cov[(1, 1)].max(0.0).sqrt()],
+            rul,
+        })
+    }
+}
+
 impl System for LinearDegradation {
     fn name(&self) -> &'static str {
         "linear_degradation"
@@ -326,6 +522,11 @@ impl System for LinearDegradation {
         if !(filter.horizon.is_finite() && filter.horizon > 0.0) {
             return Err(scenario.error_at(&["filter", "horizon"], "`horizon` must be > 0"));
         }
+        if !(filter.prediction_dt.is_finite() && filter.prediction_dt > 0.0) {
+            return Err(
+                scenario.error_at(&["filter", "prediction_dt"], "`prediction_dt` must be > 0")
+            );
+        }
         // The truth rate is drawn from the plant stream so it is part of the run's truth.
         let mut rate_rng = stream_rng(seed, stream::PLANT ^ 0x5eed);
         let plant = LinearPlant::new(plant_settings, &mut rate_rng);
@@ -335,7 +536,13 @@ impl System for LinearDegradation {
             inputs: Box::new(inputs),
             plant: Box::new(plant),
             sensor: Box::new(sensor),
-            estimator: Box::new(LinearKalman::new(filter)),
+            estimator: match filter.kind {
+                FilterKind::Kalman => Box::new(LinearKalman::new(filter)),
+                FilterKind::Particle => Box::new(
+                    LinearParticle::new(filter, scenario.dt, stream_rng(seed, stream::ESTIMATOR))
+                        .map_err(|e| scenario.error_at(&["filter"], e.to_string()))?,
+                ),
+            },
         })
     }
 }
@@ -358,6 +565,7 @@ mod tests {
             predict_every: 1,
             horizon: 1000.0,
             future_load: None,
+            ..FilterSettings::default()
         }
     }
 
