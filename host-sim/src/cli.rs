@@ -117,6 +117,16 @@ pub enum Command {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+    /// Summarise criterion results of `cargo bench -p prognos-tests --bench filters`: table,
+    /// PF scaling slope, filter overhead ratio, log-log plots.
+    BenchReport {
+        /// Criterion output folder [default: $CARGO_TARGET_DIR/criterion or target/criterion].
+        #[arg(long)]
+        criterion: Option<PathBuf>,
+        /// Folder for summary.txt and the SVG plots.
+        #[arg(long, default_value = "docs/bench")]
+        out: PathBuf,
+    },
 }
 
 /// Parses the process arguments, runs the command, prints any error, returns the status.
@@ -299,6 +309,19 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             print!("{text}");
             if let Some(path) = out {
                 crate::output::write_text(&path, &text)?;
+            }
+            Ok(())
+        }
+        Command::BenchReport { criterion, out } => {
+            let criterion = criterion.unwrap_or_else(|| {
+                std::env::var_os("CARGO_TARGET_DIR")
+                    .map_or_else(|| PathBuf::from("target"), PathBuf::from)
+                    .join("criterion")
+            });
+            let (text, files) = crate::bench_report::run(&criterion, &out)?;
+            print!("{text}");
+            for f in files {
+                println!("wrote {}", f.display());
             }
             Ok(())
         }

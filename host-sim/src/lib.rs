@@ -8,6 +8,7 @@
 //! them; then add it to [`registry::Registry::builtin`].
 
 pub mod bearing;
+pub mod bench_report;
 pub mod campaign;
 pub mod cli;
 pub mod dataio;
