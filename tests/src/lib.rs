@@ -4,3 +4,4 @@
 pub mod drag_radar;
 pub mod linear_gaussian;
 pub mod reference;
+pub mod workloads;
