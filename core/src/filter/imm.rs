@@ -79,7 +79,7 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
         if K <= 1 {
             return SMatrix::repeat(T::one());
         }
-        let off = (T::one() - stay) / cast((K - 1) as f64);
+        let off = (T::one() - stay) / cast(K.saturating_sub(1) as f64);
         SMatrix::from_fn(|i, j| if i == j { stay } else { off })
     }
 

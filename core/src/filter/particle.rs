@@ -285,7 +285,7 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
             if all_finite(next.as_slice()) {
                 *p = next;
                 *ok = T::zero();
-                survivors += 1;
+                survivors = survivors.saturating_add(1);
             } else {
                 *ok = T::min_value().unwrap_or(-T::MAX_FINITE);
             }

@@ -181,10 +181,10 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
             .l();
         let mut pts = [*x; NS];
         for (k, col) in l.column_iter().enumerate() {
-            if let Some(s) = pts.get_mut(k + 1) {
+            if let Some(s) = pts.get_mut(k.saturating_add(1)) {
                 *s = x + col;
             }
-            if let Some(s) = pts.get_mut(NX + k + 1) {
+            if let Some(s) = pts.get_mut(NX.saturating_add(k).saturating_add(1)) {
                 *s = x - col;
             }
         }

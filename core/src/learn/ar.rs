@@ -236,7 +236,7 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
         if !(config.psi.finite() && config.psi > T::zero()) {
             return Err(Error::InvalidParameter("psi"));
         }
-        if config.instrument_delay > N + Q {
+        if config.instrument_delay > N.saturating_add(Q) {
             return Err(Error::InvalidParameter("instrument_delay"));
         }
         Ok(Self {
@@ -272,13 +272,22 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
         if k == 0 {
             T::zero()
         } else if k <= N {
-            pick(self.lag_a.get(k - 1))
-        } else if k <= N + Q {
-            pick(self.lag_b.get(k - N - 1))
-        } else if k <= 2 * N + Q {
-            pick(self.lag_c.get(k - N - Q - 1))
+            pick(self.lag_a.get(k.saturating_sub(1)))
+        } else if k <= N.saturating_add(Q) {
+            pick(self.lag_b.get(k.saturating_sub(N).saturating_sub(1)))
+        } else if k <= N.saturating_mul(2).saturating_add(Q) {
+            pick(
+                self.lag_c
+                    .get(k.saturating_sub(N).saturating_sub(Q).saturating_sub(1)),
+            )
         } else {
-            pick(self.lag_d.get(k - 2 * N - Q - 1))
+            pick(
+                self.lag_d.get(
+                    k.saturating_sub(N.saturating_mul(2))
+                        .saturating_sub(Q)
+                        .saturating_sub(1),
+                ),
+            )
         }
     }
 
@@ -301,13 +310,20 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
         if !y.finite() {
             return Err(Error::NonFiniteMeasurement);
         }
-        if self.seen < N + Q + self.delay {
+        if self.seen < N.saturating_add(Q).saturating_add(self.delay) {
             self.push_lag(y);
             return Ok(());
         }
-        let phi: SVector<T, N> = SVector::from_fn(|i, _| -self.lag(i + 1));
-        let z_head: SVector<T, N> = SVector::from_fn(|i, _| -self.lag(i + 1 + self.delay));
-        let z_tail: SVector<T, Q> = SVector::from_fn(|i, _| -self.lag(i + 1 + N + self.delay));
+        let phi: SVector<T, N> = SVector::from_fn(|i, _| -self.lag(i.saturating_add(1)));
+        let z_head: SVector<T, N> =
+            SVector::from_fn(|i, _| -self.lag(i.saturating_add(1).saturating_add(self.delay)));
+        let z_tail: SVector<T, Q> = SVector::from_fn(|i, _| {
+            -self.lag(
+                i.saturating_add(1)
+                    .saturating_add(N)
+                    .saturating_add(self.delay),
+            )
+        });
         // 1-4
         let eta = self.r_head.tr_mul(&z_head) + self.r_tail.tr_mul(&z_tail);
         let big_phi = SMatrix::<T, N, 2>::from_columns(&[eta, phi]);
@@ -354,12 +370,15 @@ fn shift_in<T: Real, const M: usize>(block: &SVector<T, M>, x: T) -> (SVector<T,
     if M == 0 {
         return (*block, x);
     }
-    let out = block.get(M - 1).copied().unwrap_or(x);
+    let out = block.get(M.saturating_sub(1)).copied().unwrap_or(x);
     let shifted = SVector::from_fn(|i, _| {
         if i == 0 {
             x
         } else {
-            block.get(i - 1).copied().unwrap_or_else(T::zero)
+            block
+                .get(i.saturating_sub(1))
+                .copied()
+                .unwrap_or_else(T::zero)
         }
     });
     (shifted, out)
@@ -398,7 +417,7 @@ pub fn check_window<T: Real, I: Iterator<Item = T> + Clone>(
         if !y.finite() {
             return Err(Error::NonFiniteMeasurement);
         }
-        count += 1;
+        count = count.saturating_add(1);
         sum += y;
         lo = lo.min(y);
         hi = hi.max(y);
@@ -459,10 +478,10 @@ fn residual_model<T: Real, const N: usize, I: Iterator<Item = T>>(
         if seen >= N {
             let e = y + lags.dot(&theta);
             sum += e * e;
-            count += 1;
+            count = count.saturating_add(1);
         }
         lags = shift_in(&lags, y).0;
-        seen += 1;
+        seen = seen.saturating_add(1);
     }
     if count == 0 {
         return Err(Error::InsufficientData);

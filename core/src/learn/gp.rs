@@ -133,7 +133,7 @@ impl<T: Real, const D: usize, const M: usize> GaussianProcess<T, D, M> {
         }
         let mut l = SMatrix::<T, M, M>::zeros();
         for (i, row) in chol_lower.iter().enumerate() {
-            for (j, &r) in row.iter().enumerate().take(i + 1) {
+            for (j, &r) in row.iter().enumerate().take(i.saturating_add(1)) {
                 if let Some(v) = l.get_mut((i, j)) {
                     *v = cast(r);
                 }
