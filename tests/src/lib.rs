@@ -3,5 +3,6 @@
 #![forbid(unsafe_code)]
 
 pub mod drag_radar;
+pub mod fuzz;
 pub mod linear_gaussian;
 pub mod reference;

@@ -156,7 +156,14 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
         if !norm.finite() {
             return Err(Error::NonFiniteState);
         }
-        let probabilities = log_weights.map(|lw| (lw - norm).exp());
+        // Divided by their sum: at huge log-likelihoods `norm` loses the `ln K` term to
+        // round-off and the exponentials alone would not sum to one.
+        let unnormalised = log_weights.map(|lw| (lw - norm).exp());
+        let total = unnormalised.sum();
+        if !(total.finite() && total > T::zero()) {
+            return Err(Error::NonFiniteState);
+        }
+        let probabilities = unnormalised / total;
         let (x, p, symmetrised) = fuse(&filters, &probabilities);
         if symmetrised {
             flags.insert(Flags::COVARIANCE_SYMMETRISED);
