@@ -4,8 +4,7 @@
 
 - PF: progpy's ParticleFilter (N = 500, residual resampling every step) on progpy's
   PneumaticValveBase, over the same noisy samples (valve_measurements.csv), dt = 0.01 s,
-  one model step per filter step. Process noise comparable to ours (velocity 1e-3 m/s and
-  gas masses about 1e-4 relative per step); measurement noise as ours (position 1 mm,
+  one model step per filter step. Process noise as ours (velocity only, 1e-3 m/s per step); measurement noise as ours (position 1 mm,
   flow 0.03 m^3/s, pressures 30 kPa, indicators 0.3).
 - Prediction: progpy's MonteCarlo, 100 samples (progpy's default state with the spring
   constant of sample j as in peers.rs), spring wear wk, no process noise, dt = 0.01 s,
@@ -51,8 +50,8 @@ def run_pf(rows, noise, particles, seed):
             "Aeb": 0, "Aet": 0, "Ai": 0, "k": 0, "r": 0, "x": 0, "pDiff": 0,
             # progpy adds dt * N(0, pn): 0.1 m/s gives 1e-3 m/s per step, as ours.
             "v": 0.1,
-            "mTop": 6.8e-4,
-            "mBot": 6.8e-4,
+            "mTop": 0,
+            "mBot": 0,
         },
     )
     u0 = load(0.0, model=m)
@@ -225,6 +224,14 @@ def main():
         f"max {max(eol_diff) if eol_diff else float('nan'):.3f} s; "
         f"EOL range ours {min(b for _, b in both):.2f}..{max(b for _, b in both):.2f} s"
     )
+    ref_eol = rust["prediction"]["eol_reference_s"]
+    err_peer = [abs(pred["eol_s"][j] - t) for j, t in ref_eol]
+    err_ours = [abs(ours_eol[j] - t) for j, t in ref_eol]
+    lines.append(
+        f"EOL against the dt = {rust['prediction']['reference_dt']} s reference ({len(ref_eol)} samples): "
+        f"mean |err| progpy {statistics.fmean(err_peer):.3f} s (max {max(err_peer):.3f}), "
+        f"ours {statistics.fmean(err_ours):.3f} s (max {max(err_ours):.3f})"
+    )
     lines.append(f"UKF final state, filterpy vs ours: max |diff| {ukf_diff:.3e}")
     lines.append("")
     lines.append("Opening / closing time [s] (dt each model uses, against the dt = 1e-5 s reference)")
@@ -251,6 +258,10 @@ def main():
         "ours": rust,
         "ratios": ratios,
         "eol_mean_abs_diff_s": statistics.fmean(eol_diff) if eol_diff else None,
+        "eol_reference_mean_abs_err_s": {
+            "progpy": statistics.fmean(err_peer),
+            "ours": statistics.fmean(err_ours),
+        },
         "ukf_final_state_max_abs_diff": ukf_diff,
         "table": text,
     }

@@ -184,9 +184,10 @@ fn run_pf(samples: &ValveSamples, reps: usize) -> PfResult {
         params,
         measurements: MeasurementSet::All,
         sensor_noise: filter_noise(),
+        // Velocity noise only (1e-3 m/s per step while moving), which progpy's additive
+        // `dt * N(0, 0.1)` on `v` matches; gas-mass noise has no common form (ours is relative).
         process_noise: ProcessNoise {
             v: 0.01,
-            mass_rel: 1e-3,
             ..ProcessNoise::default()
         },
     };
@@ -236,7 +237,12 @@ fn run_pf(samples: &ValveSamples, reps: usize) -> PfResult {
 struct PredictionResult {
     seconds: f64,
     eol: Vec<f64>,
+    /// `(sample, EOL)` at the fine reference step for every fifth sample.
+    reference: Vec<(usize, f64)>,
 }
+
+/// Fine step of the EOL reference [s].
+const REFERENCE_DT: f64 = 1e-4;
 
 /// Initial spring constant of prediction sample `j` (the same formula in `bench/peers.py`).
 fn initial_spring(j: usize) -> f64 {
@@ -273,9 +279,28 @@ fn run_prediction(reps: usize) -> PredictionResult {
         .expect("samples reach EOL");
         times.push(start.elapsed().as_secs_f64());
     }
+    // Reference EOL: the same physics at a 100 times finer step.
+    let fine = filter_params(REFERENCE_DT);
+    let fine_model = Valve::new(fine, MeasurementSet::All);
+    let fine_settings = PredictionSettings::deterministic(REFERENCE_DT, 2_000_000);
+    let picked: Vec<usize> = (0..SAMPLES).step_by(5).collect();
+    let fine_states: Vec<SVector<f64, 14>> = picked.iter().map(|&j| states[j]).collect();
+    let mut fine_eol = vec![0.0; fine_states.len()];
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(0);
+    predict_eol(
+        &fine_model,
+        &PROGPY_LIMITS,
+        &fine_states,
+        |k| command(&fine, f64::from(k) * REFERENCE_DT),
+        &fine_settings,
+        &mut rng,
+        &mut fine_eol,
+    )
+    .expect("reference samples reach EOL");
     PredictionResult {
         seconds: median(times),
         eol,
+        reference: picked.into_iter().zip(fine_eol).collect(),
     }
 }
 
@@ -393,6 +418,8 @@ fn main() {
             "k_nominal": K_NOMINAL,
             "seconds": prediction.seconds,
             "eol_s": prediction.eol,
+            "reference_dt": REFERENCE_DT,
+            "eol_reference_s": prediction.reference,
             "reached": reached.len(),
         },
         "ukf": {
