@@ -279,8 +279,12 @@ pub fn run(criterion_dir: &Path, out_dir: &Path) -> Result<(String, Vec<PathBuf>
     let summary = out_dir.join("summary.txt");
     write_text(&summary, &text)?;
     files.push(summary);
+    // Plotted in microseconds (the fit's slope does not depend on the unit).
     let with_fit = |name: &str, group: &str| {
-        let points = series(&entries, group);
+        let points: Vec<(f64, f64)> = series(&entries, group)
+            .into_iter()
+            .map(|(x, ns)| (x, ns * 1e-3))
+            .collect();
         let fit = fit_power_law(&points);
         LogLogSeries {
             name: match fit {
@@ -320,7 +324,7 @@ pub fn run(criterion_dir: &Path, out_dir: &Path) -> Result<(String, Vec<PathBuf>
             continue;
         }
         let path = out_dir.join(file);
-        plot_loglog(&path, title, x_label, "time per step [ns]", &series)?;
+        plot_loglog(&path, title, x_label, "time per step [us]", &series)?;
         files.push(path);
     }
     Ok((text, files))

@@ -385,10 +385,19 @@ pub fn plot_loglog(
             .y_label_area_size(70)
             .build_cartesian_2d(xr.clone().log_scale(), yr.clone().log_scale())
             .map_err(err)?;
+        let label = |v: &f64| {
+            if *v >= 1.0 {
+                format!("{v:.0}")
+            } else {
+                format!("{v}")
+            }
+        };
         chart
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
+            .x_label_formatter(&label)
+            .y_label_formatter(&label)
             .draw()
             .map_err(err)?;
         for (s, color) in series.iter().zip(COLORS.iter().cycle()) {
