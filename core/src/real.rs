@@ -16,6 +16,15 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     fn finite(self) -> bool;
     /// True for NaN.
     fn nan(self) -> bool;
+    /// Sine for hot paths: single-precision [`crate::fastmath`] in f32, the ordinary `sin` in
+    /// f64 (so that host results are unchanged).
+    fn fast_sin(self) -> Self;
+    /// Cosine for hot paths (see [`Real::fast_sin`]).
+    fn fast_cos(self) -> Self;
+    /// `e^x` for hot paths (see [`Real::fast_sin`]).
+    fn fast_exp(self) -> Self;
+    /// Hyperbolic tangent for hot paths (see [`Real::fast_sin`]).
+    fn fast_tanh(self) -> Self;
 }
 
 impl Real for f64 {
@@ -34,6 +43,22 @@ impl Real for f64 {
     fn nan(self) -> bool {
         self.is_nan()
     }
+    #[inline]
+    fn fast_sin(self) -> Self {
+        nalgebra::ComplexField::sin(self)
+    }
+    #[inline]
+    fn fast_cos(self) -> Self {
+        nalgebra::ComplexField::cos(self)
+    }
+    #[inline]
+    fn fast_exp(self) -> Self {
+        nalgebra::ComplexField::exp(self)
+    }
+    #[inline]
+    fn fast_tanh(self) -> Self {
+        nalgebra::ComplexField::tanh(self)
+    }
 }
 
 impl Real for f32 {
@@ -51,6 +76,22 @@ impl Real for f32 {
     #[inline]
     fn nan(self) -> bool {
         self.is_nan()
+    }
+    #[inline]
+    fn fast_sin(self) -> Self {
+        crate::fastmath::sin(self)
+    }
+    #[inline]
+    fn fast_cos(self) -> Self {
+        crate::fastmath::cos(self)
+    }
+    #[inline]
+    fn fast_exp(self) -> Self {
+        crate::fastmath::exp(self)
+    }
+    #[inline]
+    fn fast_tanh(self) -> Self {
+        crate::fastmath::tanh(self)
     }
 }
 
