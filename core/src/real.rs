@@ -25,6 +25,11 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     fn fast_exp(self) -> Self;
     /// Hyperbolic tangent for hot paths (see [`Real::fast_sin`]).
     fn fast_tanh(self) -> Self;
+    /// A uniform value in [0, 1) from the top bits of a 64-bit random draw (as many bits as
+    /// the mantissa holds, converted without leaving the type's precision).
+    fn unit_from_bits(bits: u64) -> Self;
+    /// A uniform value in (0, 1) from the top bits of a 64-bit random draw.
+    fn open_unit_from_bits(bits: u64) -> Self;
 }
 
 impl Real for f64 {
@@ -59,6 +64,14 @@ impl Real for f64 {
     fn fast_tanh(self) -> Self {
         nalgebra::ComplexField::tanh(self)
     }
+    #[inline]
+    fn unit_from_bits(bits: u64) -> Self {
+        (bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+    #[inline]
+    fn open_unit_from_bits(bits: u64) -> Self {
+        ((bits >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
+    }
 }
 
 impl Real for f32 {
@@ -92,6 +105,16 @@ impl Real for f32 {
     #[inline]
     fn fast_tanh(self) -> Self {
         crate::fastmath::tanh(self)
+    }
+    #[inline]
+    fn unit_from_bits(bits: u64) -> Self {
+        // 24 bits: exact in f32, at most 1 - 2^-24.
+        ((bits >> 40) as u32) as f32 * (1.0 / (1u32 << 24) as f32)
+    }
+    #[inline]
+    fn open_unit_from_bits(bits: u64) -> Self {
+        // 23 bits plus a half: exact in f32, within [2^-24, 1 - 2^-24].
+        (((bits >> 41) as u32) as f32 + 0.5) * (1.0 / (1u32 << 23) as f32)
     }
 }
 
