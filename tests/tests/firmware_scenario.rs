@@ -59,7 +59,9 @@ fn run_scooter<T: Real>() -> (f64, f64) {
 #[test]
 fn wheel_scenario_predicts_the_true_rul_in_f64_and_f32() {
     let (rul, truth, (b, beta)) = run_wheel::<f64>();
-    println!("firmware-reference wheel rul_s={rul:.3} true_rul_s={truth:.3} b={b:.3} beta={beta:.4e}");
+    println!(
+        "firmware-reference wheel rul_s={rul:.3} true_rul_s={truth:.3} b={b:.3} beta={beta:.4e}"
+    );
     let (rul32, _, _) = run_wheel::<f32>();
     println!("firmware-reference wheel host_f32_rul_s={rul32:.3}");
     assert!(truth > 1000.0 && truth < 2000.0, "true RUL {truth}");
@@ -72,7 +74,9 @@ fn scooter_scenario_predicts_both_usages_in_f64_and_f32() {
     let (first, last) = run_scooter::<f64>();
     println!("firmware-reference scooter rul_usage1_s={first:.4} rul_s={last:.4}");
     let (first32, last32) = run_scooter::<f32>();
-    println!("firmware-reference scooter host_f32_rul_usage1_s={first32:.4} host_f32_rul_s={last32:.4}");
+    println!(
+        "firmware-reference scooter host_f32_rul_usage1_s={first32:.4} host_f32_rul_s={last32:.4}"
+    );
     assert!(first > 0.0 && last > 0.0);
     assert!((first32 - first).abs() / first < 0.02);
     assert!((last32 - last).abs() / last < 0.02);

@@ -195,7 +195,8 @@ impl<T: Real> WheelPlant<T> {
             (k_ripple * self.angle).fast_sin() * dt
         };
         let mean_current = half * (x0.x + x1.x);
-        let speed = x1.y + p.torque_constant * mean_current * p.torque_ripple * integral / p.inertia;
+        let speed =
+            x1.y + p.torque_constant * mean_current * p.torque_ripple * integral / p.inertia;
         let tau: T = cast(core::f64::consts::TAU);
         self.angle = angle_end - tau * (angle_end / tau).floor();
         self.current = x1.x;
