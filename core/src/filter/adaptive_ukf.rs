@@ -324,8 +324,8 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
                 *e = update.innovation;
                 *c = correction;
             }
-            self.head = (self.head + 1) % L;
-            self.filled = (self.filled + 1).min(L);
+            self.head = self.head.saturating_add(1).checked_rem(L).unwrap_or(0);
+            self.filled = self.filled.saturating_add(1).min(L);
         }
         if self.config.mode != Adaptation::None && self.filled == L {
             flags.insert(self.match_covariances(&update.innovation_cov));

@@ -181,10 +181,10 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
             .l();
         let mut pts = [*x; NS];
         for (k, col) in l.column_iter().enumerate() {
-            if let Some(s) = pts.get_mut(k + 1) {
+            if let Some(s) = pts.get_mut(k.saturating_add(1)) {
                 *s = x + col;
             }
-            if let Some(s) = pts.get_mut(NX + k + 1) {
+            if let Some(s) = pts.get_mut(NX.saturating_add(k).saturating_add(1)) {
                 *s = x - col;
             }
         }
@@ -291,9 +291,16 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
             s_cov += dz * dz.transpose() * *w;
             pxz += (s - self.x) * dz.transpose() * *w;
         }
+        // Finite predicted measurements can still overflow in the outer products.
+        if !all_finite(s_cov.as_slice()) || !all_finite(pxz.as_slice()) {
+            return Err(Error::NonFiniteState);
+        }
         let chol = Cholesky::new(s_cov).ok_or(Error::NotPositiveDefinite)?;
         let innovation = y - zp;
         let nis = innovation.dot(&chol.solve(&innovation));
+        // An innovation too large to square (NaN from inf - inf or 0 * inf) is infinitely
+        // implausible: it fails the gate below (flagged as rejected), never reaches the state.
+        let nis = if nis.nan() { T::MAX_FINITE } else { nis };
         let mut report = UkfReport {
             innovation,
             innovation_cov: s_cov,

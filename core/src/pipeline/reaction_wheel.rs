@@ -11,7 +11,7 @@
 
 use crate::error::Error;
 use crate::filter::adaptive::{AdaptiveConfig, AdaptiveFilter, Method};
-use crate::filter::particle::{ParticleFilter, PfConfig};
+use crate::filter::particle::{ParticleFilter, PfConfig, PfReport};
 use crate::plants::reaction_wheel::{
     BETA_UNIT, ExposureAccumulator, IntervalExposure, LossAccumulationModel, LossRateModel,
     LossRatioModel, WheelTemperatureModel,
@@ -80,6 +80,12 @@ pub struct ReactionWheelReport<T> {
     pub temperature_std: T,
     /// The sample was missing: the temperature filter only predicted.
     pub predict_only: bool,
+    /// The wheel measurement reweighted the temperature particles (false when missing or
+    /// when every particle's likelihood collapsed: see `flags`).
+    pub fused: bool,
+    /// Log evidence of the wheel measurement under the temperature filter (if not
+    /// fused: the lowest value): the filter's test statistic for outliers.
+    pub log_evidence: T,
     /// A consumption interval was closed and the loss filters updated.
     pub interval_closed: bool,
     /// Two-step estimate of b (degC).
@@ -178,6 +184,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         predict_only: bool,
         interval_closed: bool,
         flags: Flags,
+        filter: Option<&PfReport<T>>,
     ) -> ReactionWheelReport<T> {
         let mean = self.temperature.filter().mean();
         let var = self
@@ -196,6 +203,9 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
                 T::zero()
             },
             predict_only,
+            fused: filter.is_some_and(|r| r.fused),
+            log_evidence: filter
+                .map_or(T::min_value().unwrap_or(-T::MAX_FINITE), |r| r.log_evidence),
             interval_closed,
             b,
             beta,
@@ -272,7 +282,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             )?;
             self.last = Some((t, command_v));
             self.last_reading = reading;
-            return Ok(self.report(false, false, Flags::NONE));
+            return Ok(self.report(false, false, Flags::NONE, None));
         };
         let dt = t - t_prev;
         if !(dt > T::zero()) {
@@ -298,7 +308,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
                 if consumption > T::zero()
                     && let Ok(exposure) = self.exposure.take()
                 {
-                    self.update_loss(exposure, consumption, rng);
+                    flags.insert(self.update_loss(exposure, consumption, rng));
                     closed = true;
                 }
             } else {
@@ -307,7 +317,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             self.last_reading = Some(x);
         }
         self.last = Some((t, command_v));
-        Ok(self.report(wheel_y.is_none(), closed, flags))
+        Ok(self.report(wheel_y.is_none(), closed, flags, Some(&r.filter)))
     }
 
     fn update_loss<R: Rng + ?Sized>(
@@ -315,7 +325,8 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         exposure: IntervalExposure<T>,
         consumption: T,
         rng: &mut R,
-    ) {
+    ) -> Flags {
+        let mut flags = Flags::NONE;
         let noise = self.config.loss_relative_noise;
         let u = exposure.as_input();
         let one = T::one();
@@ -323,8 +334,8 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             let bu = before.as_input();
             let u6 = SVector::<T, 6>::from([u.x, u.y, u.z, bu.x, bu.y, bu.z]);
             let ratio = consumption / previous_consumption;
-            // A rejected update leaves the filter unchanged; the next interval retries.
-            let _ = self.ratio.step(
+            // A rejected update leaves the filter unchanged (flagged); the next interval retries.
+            let ratio_step = self.ratio.step(
                 &LossRatioModel {
                     relative_noise: noise,
                 },
@@ -334,10 +345,13 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
                 T::zero(),
                 rng,
             );
+            if ratio_step.is_err() {
+                flags.insert(Flags::MEASUREMENT_REJECTED);
+            }
         }
         let b_hat = self.ratio.filter().mean().x;
         let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, b_hat]);
-        let _ = self.rate.step(
+        let rate_step = self.rate.step(
             &LossRateModel {
                 relative_noise: noise,
             },
@@ -347,7 +361,11 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             T::zero(),
             rng,
         );
+        if rate_step.is_err() {
+            flags.insert(Flags::MEASUREMENT_REJECTED);
+        }
         self.previous_interval = Some((exposure, consumption));
+        flags
     }
 
     /// RUL distribution (s): time until the cumulative consumption reaches `threshold` (mL)
