@@ -7,7 +7,8 @@
 #   scooter:        worst instructions per 50 Hz sample <= 336,000
 #   each image:     static RAM (data + bss) <= 64 KiB, stack high-water <= 8 KiB,
 #                   flash (vectors + text + rodata + data) <= 256 KiB
-# (Stack: see stack_check below for the budget the firmware does not meet yet.)
+# (Stack: the per-sample loop and the RUL prediction meet 8 KiB; start-up does not yet, see
+# stack_check below.)
 # The plain-text build is the one parsed; the defmt build is built, sized and run for its exit
 # status only (decoding needs `cargo install defmt-print`, about 3 minutes: see README).
 set -euo pipefail
@@ -92,12 +93,14 @@ for bin in reaction_wheel scooter; do
     grep -q "result=pass" "$log" || fail "$bin did not report result=pass"
     sizes "$ELF_DIR/$bin" "$bin (plain)"
     sizes "$DEFMT_DIR/$bin" "$bin (defmt)"
-    if [ "$bin" = reaction_wheel ]; then startup_ceiling=17300; loop_ceiling=8192; else startup_ceiling=11400; loop_ceiling=12200; fi
-    stack_check "$bin stack high-water bytes (per-sample loop)" "$(value stack_high_water_bytes "$log")" "$loop_ceiling"
+    # Start-up (constructing the pipeline before it moves into its static) misses 8 KiB;
+    # the ceilings are the measured values plus 5 %.
+    if [ "$bin" = reaction_wheel ]; then startup_ceiling=17300; else startup_ceiling=9300; fi
+    check "$bin stack high-water bytes (per-sample loop)" "$(value stack_high_water_bytes "$log")" 8192
     stack_check "$bin stack high-water bytes (start-up)" "$(value init_stack_high_water_bytes "$log")" "$startup_ceiling"
     if [ "$bin" = reaction_wheel ]; then
         check "$bin worst instructions per sample" "$(value step_worst_instructions "$log")" 840000
-        stack_check "$bin stack high-water bytes (RUL prediction)" "$(value rul_stack_high_water_bytes "$log")" 8192
+        check "$bin stack high-water bytes (RUL prediction)" "$(value rul_stack_high_water_bytes "$log")" 8192
         rul_check "$bin RUL" "$(value rul_s "$log")" \
             "$(grep 'firmware-reference wheel' "$HOST_LOG" | grep -o ' rul_s=[^ ]*' | cut -d= -f2)"
     else
