@@ -21,8 +21,8 @@ const REDUCTION_LIMIT: f32 = 8192.0;
 const TWO_OVER_PI: f32 = core::f32::consts::FRAC_2_PI;
 // pi/2 split so that k * PIO2_HI and k * PIO2_MID are exact for k < 2^13 (Cephes DP1..3 x 2).
 const PIO2_HI: f32 = 1.570_312_5;
-const PIO2_MID: f32 = 4.837_512_969_970_703e-4;
-const PIO2_LO: f32 = 7.549_789_954_891_816e-8;
+const PIO2_MID: f32 = 4.837_513e-4;
+const PIO2_LO: f32 = 7.549_79e-8;
 
 #[inline(always)]
 fn sin_kernel(r: f32) -> f32 {
@@ -132,13 +132,13 @@ pub fn exp(x: f32) -> f32 {
     // k in [-150, 128]: scale in two exact power-of-two steps so subnormals come out right.
     let k = k as i32;
     let half = k / 2;
-    p * pow2(half) * pow2(k - half)
+    p * pow2(half) * pow2(k.saturating_sub(half))
 }
 
 /// `2^k` for k in [-126, 127], built from the exponent bits.
 #[inline(always)]
 fn pow2(k: i32) -> f32 {
-    let biased = (k + 127).clamp(1, 254) as u32;
+    let biased = k.saturating_add(127).clamp(1, 254) as u32;
     f32::from_bits(biased << 23)
 }
 

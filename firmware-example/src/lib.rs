@@ -7,7 +7,9 @@
 #![deny(unsafe_code)]
 
 #[cfg(all(feature = "defmt", feature = "plain"))]
-compile_error!("choose one log format: default (defmt) or `--no-default-features --features plain`");
+compile_error!(
+    "choose one log format: default (defmt) or `--no-default-features --features plain`"
+);
 #[cfg(not(any(feature = "defmt", feature = "plain")))]
 compile_error!("enable `defmt` (default) or `plain`");
 

@@ -30,10 +30,18 @@ fn main() -> ! {
     let mut driver = WheelDriver::new(WheelFrontEnd::wheel());
     let init_stack = measure::stack_high_water();
     measure::repaint_stack();
-    say!("firmware=reaction_wheel particles={} loss_particles={} samples={}", N as u32, M as u32, wheel::STEPS + 1);
+    say!(
+        "firmware=reaction_wheel particles={} loss_particles={} samples={}",
+        N as u32,
+        M as u32,
+        wheel::STEPS + 1
+    );
 
-    let (mut steps, mut closing, mut plant_cost) =
-        (StepStats::default(), StepStats::default(), StepStats::default());
+    let (mut steps, mut closing, mut plant_cost) = (
+        StepStats::default(),
+        StepStats::default(),
+        StepStats::default(),
+    );
     for k in 0..=wheel::STEPS {
         let start = counter.now();
         if k > 0 {
@@ -68,13 +76,33 @@ fn main() -> ! {
     let (b, beta) = pipeline.loss_parameters();
     let rul_stack = measure::stack_high_water();
 
-    say!("step_worst_instructions={} worst_step={} step_mean_instructions={}", steps.worst, steps.worst_step, steps.mean());
-    say!("interval_close_worst_instructions={} intervals={}", closing.worst, closing.count);
+    say!(
+        "step_worst_instructions={} worst_step={} step_mean_instructions={}",
+        steps.worst,
+        steps.worst_step,
+        steps.mean()
+    );
+    say!(
+        "interval_close_worst_instructions={} intervals={}",
+        closing.worst,
+        closing.count
+    );
     say!("plant_mean_instructions={}", plant_cost.mean());
     say!("rul_prediction_instructions={}", rul_cost);
-    say!("stack_high_water_bytes={} init_stack_high_water_bytes={} rul_stack_high_water_bytes={}", step_stack, init_stack, rul_stack);
+    say!(
+        "stack_high_water_bytes={} init_stack_high_water_bytes={} rul_stack_high_water_bytes={}",
+        step_stack,
+        init_stack,
+        rul_stack
+    );
     say!("b_degc={} beta_ul_per_s={}", b, beta * 1.0e3);
-    say!("rul_s={} rul_p05_s={} rul_p95_s={} true_rul_s={}", rul.median, rul.p05, rul.p95, plant.true_rul() as f32);
+    say!(
+        "rul_s={} rul_p05_s={} rul_p95_s={} true_rul_s={}",
+        rul.median,
+        rul.p05,
+        rul.p95,
+        plant.true_rul() as f32
+    );
     let pass = rul.median.is_finite() && rul.median > 0.0;
     say!("result={}", if pass { "pass" } else { "fail" });
     measure::exit(pass)

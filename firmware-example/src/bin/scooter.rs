@@ -49,7 +49,12 @@ fn main() -> ! {
         steps.record(k, counter.since(start));
         if let Some(Outcome::Predicted(segment)) = report.outcome {
             let rul = segment.rul();
-            say!("prediction usage={} t_s={} rul_s={}", segment.usage, segment.t_id, rul);
+            say!(
+                "prediction usage={} t_s={} rul_s={}",
+                segment.usage,
+                segment.t_id,
+                rul
+            );
             if predictions == 0 {
                 first_rul = rul;
             }
@@ -58,10 +63,24 @@ fn main() -> ! {
         }
     }
     let stack = measure::stack_high_water();
-    say!("step_worst_instructions={} worst_step={} step_mean_instructions={}", steps.worst, steps.worst_step, steps.mean());
+    say!(
+        "step_worst_instructions={} worst_step={} step_mean_instructions={}",
+        steps.worst,
+        steps.worst_step,
+        steps.mean()
+    );
     say!("plant_mean_instructions={}", plant_cost.mean());
-    say!("stack_high_water_bytes={} init_stack_high_water_bytes={}", stack, init_stack);
-    say!("predictions={} rul_usage1_s={} rul_s={}", predictions, first_rul, last_rul);
+    say!(
+        "stack_high_water_bytes={} init_stack_high_water_bytes={}",
+        stack,
+        init_stack
+    );
+    say!(
+        "predictions={} rul_usage1_s={} rul_s={}",
+        predictions,
+        first_rul,
+        last_rul
+    );
     let pass = predictions >= 2 && last_rul.is_finite() && last_rul > 0.0;
     say!("result={}", if pass { "pass" } else { "fail" });
     measure::exit(pass)

@@ -214,7 +214,7 @@ impl<T: Real> WheelPlant<T> {
         let (current_std, speed_std) = SENSOR_STD;
         let current = normal(&mut self.rng, self.current, cast(current_std));
         let speed = normal(&mut self.rng, self.speed, cast(speed_std));
-        let gauge_ready = self.k % INTERVAL_SAMPLES == 0;
+        let gauge_ready = self.k.is_multiple_of(INTERVAL_SAMPLES);
         if gauge_ready && self.k > 0 {
             let noisy = normal(
                 &mut self.rng,
