@@ -7,8 +7,7 @@
 #   scooter:        worst instructions per 50 Hz sample <= 336,000
 #   each image:     static RAM (data + bss) <= 64 KiB, stack high-water <= 8 KiB,
 #                   flash (vectors + text + rodata + data) <= 256 KiB
-# (Stack: the per-sample loop and the RUL prediction meet 8 KiB; start-up does not yet, see
-# stack_check below.)
+# (Stack: everything meets 8 KiB except the reaction wheel's start-up, see stack_check below.)
 # The plain-text build is the one parsed; the defmt build is built, sized and run for its exit
 # status only (decoding needs `cargo install defmt-print`, about 3 minutes: see README).
 set -euo pipefail
@@ -93,9 +92,9 @@ for bin in reaction_wheel scooter; do
     grep -q "result=pass" "$log" || fail "$bin did not report result=pass"
     sizes "$ELF_DIR/$bin" "$bin (plain)"
     sizes "$DEFMT_DIR/$bin" "$bin (defmt)"
-    # Start-up (constructing the pipeline before it moves into its static) misses 8 KiB;
-    # the ceilings are the measured values plus 5 %.
-    if [ "$bin" = reaction_wheel ]; then startup_ceiling=17300; else startup_ceiling=9300; fi
+    # The wheel's start-up (ReactionWheel::new assembling its filters on the stack) misses
+    # 8 KiB; its ceiling is the measured value plus 5 %. The scooter's meets it.
+    if [ "$bin" = reaction_wheel ]; then startup_ceiling=17300; else startup_ceiling=8192; fi
     check "$bin stack high-water bytes (per-sample loop)" "$(value stack_high_water_bytes "$log")" 8192
     stack_check "$bin stack high-water bytes (start-up)" "$(value init_stack_high_water_bytes "$log")" "$startup_ceiling"
     if [ "$bin" = reaction_wheel ]; then

@@ -6,6 +6,7 @@
 
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use prognos_core::pipeline::Scooter;
+use prognos_core::pipeline::scooter::ScooterReport;
 use prognos_core::prognose::sequential::Outcome;
 use prognos_firmware::devices::{ScooterDriver, ScooterFrontEnd};
 use prognos_firmware::measure::{self, InstructionCounter, StepStats};
@@ -39,13 +40,7 @@ fn main() -> ! {
         plant_cost.record(k, counter.since(start));
 
         let start = counter.now();
-        let Ok(raw) = driver.read() else {
-            fail("sensor read", k)
-        };
-        let y = scooter::convert::<f32>(&raw);
-        let Ok(report) = scooter::step(pipeline, k, plant.input(), &y) else {
-            fail("pipeline step", k)
-        };
+        let report = controller_step(&mut driver, pipeline, k, plant.input());
         steps.record(k, counter.since(start));
         if let Some(Outcome::Predicted(segment)) = report.outcome {
             let rul = segment.rul();
@@ -84,6 +79,26 @@ fn main() -> ! {
     let pass = predictions >= 2 && last_rul.is_finite() && last_rul > 0.0;
     say!("result={}", if pass { "pass" } else { "fail" });
     measure::exit(pass)
+}
+
+/// What the controller does per sample: read the front-end over I2C, convert, step. Not
+/// inlined, so that `main`'s frame (live during start-up) does not hold the step's
+/// temporaries.
+#[inline(never)]
+fn controller_step(
+    driver: &mut ScooterDriver<ScooterFrontEnd>,
+    pipeline: &mut Scooter<f32>,
+    k: u32,
+    u: f32,
+) -> ScooterReport<f32> {
+    let Ok(raw) = driver.read() else {
+        fail("sensor read", k)
+    };
+    let y = scooter::convert::<f32>(&raw);
+    match scooter::step(pipeline, k, u, &y) {
+        Ok(report) => report,
+        Err(_) => fail("pipeline step", k),
+    }
 }
 
 /// Builds the statics. Not inlined: its frame (the constructors' temporaries) is released
