@@ -107,6 +107,20 @@ pub enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Long-run stability: run each on-board pipeline in f32 for many steps against a truth
+    /// plant, checking every step for errors, NaN/infinity and covariance blow-up; prints
+    /// steps per second. Exit status 1 if any pipeline fails.
+    Soak {
+        /// Steps per pipeline.
+        #[arg(long, default_value_t = 10_000_000)]
+        steps: u64,
+        /// Only this pipeline (reaction_wheel, scooter, edge).
+        #[arg(long)]
+        system: Option<String>,
+        /// Seed of the truth plants' and the filters' random streams.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// Edge-cloud prognosis (AR model-of-signals on the edge, particle filter in the cloud)
     /// of one bearing vibration file (PRONOSTIA format, see data/pronostia/README.md).
     EdgeCloud {
@@ -301,6 +315,37 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 crate::output::write_text(&path, &text)?;
             }
             Ok(())
+        }
+        Command::Soak {
+            steps,
+            system,
+            seed,
+        } => {
+            let systems: Vec<&str> = match system.as_deref() {
+                Some(name) if crate::soak::SYSTEMS.contains(&name) => vec![name],
+                Some(name) => {
+                    return Err(SimError::Run(format!(
+                        "unknown soak system `{name}` (known: {})",
+                        crate::soak::SYSTEMS.join(", ")
+                    )));
+                }
+                None => crate::soak::SYSTEMS.to_vec(),
+            };
+            let mut failed = Vec::new();
+            for name in systems {
+                let Some(report) = crate::soak::soak(name, steps, seed) else {
+                    continue;
+                };
+                println!("{}", report.line());
+                if !report.passed() {
+                    failed.push(name);
+                }
+            }
+            if failed.is_empty() {
+                Ok(())
+            } else {
+                Err(SimError::Run(format!("soak failed: {}", failed.join(", "))))
+            }
         }
         Command::EdgeCloud { .. } => Err(SimError::Run(
             "edge-cloud is handled before dispatch".into(),

@@ -24,6 +24,7 @@ pub mod registry;
 pub mod reproduce;
 pub mod scenario;
 pub mod scooter;
+pub mod soak;
 pub mod valve;
 
 pub use error::SimError;
