@@ -121,6 +121,19 @@ pub enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+    /// Fault injection: RUL error with 5 % dropouts and 1 % outliers against clean runs of
+    /// the same seeds, for each system wired to the injector (markdown table).
+    Faults {
+        /// Runs (seeds) per case.
+        #[arg(long, default_value_t = 20)]
+        runs: usize,
+        /// Base seed.
+        #[arg(long, default_value_t = 20261201)]
+        seed: u64,
+        /// Also write the table to this file (atomically).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Edge-cloud prognosis (AR model-of-signals on the edge, particle filter in the cloud)
     /// of one bearing vibration file (PRONOSTIA format, see data/pronostia/README.md).
     EdgeCloud {
@@ -310,6 +323,14 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 runs.unwrap_or(table.default_runs()),
                 seed.unwrap_or(table.default_seed()),
             );
+            print!("{text}");
+            if let Some(path) = out {
+                crate::output::write_text(&path, &text)?;
+            }
+            Ok(())
+        }
+        Command::Faults { runs, seed, out } => {
+            let text = crate::faults::table(runs, seed);
             print!("{text}");
             if let Some(path) = out {
                 crate::output::write_text(&path, &text)?;
