@@ -23,6 +23,7 @@ extern crate std;
 
 pub mod diagnose;
 pub mod error;
+pub mod fastmath;
 pub mod filter;
 pub mod health;
 pub mod learn;
