@@ -112,6 +112,7 @@ pub struct LossKalman<T: Real> {
     state: Vector2<T>,
     covariance: Matrix2<T>,
     cusum: T,
+    changes: u32,
 }
 
 impl<T: Real> LossKalman<T> {
@@ -143,6 +144,7 @@ impl<T: Real> LossKalman<T> {
                 beta_rel_std * beta_rel_std,
             ),
             cusum: T::zero(),
+            changes: 0,
         })
     }
 
@@ -159,6 +161,11 @@ impl<T: Real> LossKalman<T> {
     /// Covariance of the state.
     pub fn covariance(&self) -> &Matrix2<T> {
         &self.covariance
+    }
+
+    /// How many changes the detector has declared so far.
+    pub fn changes_detected(&self) -> u32 {
+        self.changes
     }
 
     /// The settings.
@@ -222,6 +229,7 @@ impl<T: Real> LossKalman<T> {
             let e = next.config.enhancement;
             next.covariance += Matrix2::from_diagonal(&e.component_mul(&e));
             next.cusum = T::zero();
+            next.changes = next.changes.saturating_add(1);
             flags.insert(Flags::COVARIANCE_ENHANCED);
             s = (h.transpose() * next.covariance * h).x + r;
         }
