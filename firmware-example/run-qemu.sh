@@ -94,7 +94,7 @@ for bin in reaction_wheel scooter; do
     sizes "$DEFMT_DIR/$bin" "$bin (defmt)"
     # The wheel's start-up (ReactionWheel::new assembling its filters on the stack) misses
     # 8 KiB; its ceiling is the measured value plus 5 %. The scooter's meets it.
-    if [ "$bin" = reaction_wheel ]; then startup_ceiling=17300; else startup_ceiling=8192; fi
+    if [ "$bin" = reaction_wheel ]; then startup_ceiling=14700; else startup_ceiling=8192; fi
     check "$bin stack high-water bytes (per-sample loop)" "$(value stack_high_water_bytes "$log")" 8192
     stack_check "$bin stack high-water bytes (start-up)" "$(value init_stack_high_water_bytes "$log")" "$startup_ceiling"
     if [ "$bin" = reaction_wheel ]; then

@@ -15,6 +15,7 @@ pub mod cli;
 pub mod dataio;
 pub mod edge_cloud;
 pub mod error;
+pub mod faults;
 pub mod linear_degradation;
 pub mod lockstep;
 pub mod output;
@@ -25,6 +26,7 @@ pub mod registry;
 pub mod reproduce;
 pub mod scenario;
 pub mod scooter;
+pub mod soak;
 pub mod valve;
 
 pub use error::SimError;

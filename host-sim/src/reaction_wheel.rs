@@ -792,6 +792,11 @@ impl LossEstimators {
         )
     }
 
+    /// Changes declared by the Kalman filter's detector so far.
+    pub fn kalman_changes(&self) -> u32 {
+        self.kalman.changes_detected()
+    }
+
     /// Log-linear Kalman filter estimate `(b, beta in mL/s)`.
     pub fn kalman(&self) -> (f64, f64) {
         self.kalman.parameters()
@@ -1134,6 +1139,8 @@ pub struct Step3Outcome {
     pub kalman_predictions: Vec<RulPrediction>,
     /// Final two-step estimates `(b, beta)`.
     pub final_parameters: (f64, f64),
+    /// Changes declared by the Kalman filter's detector over the run (one true fault).
+    pub kalman_changes: u32,
     /// Wall time of the run (s).
     pub seconds: f64,
 }
@@ -1259,6 +1266,7 @@ pub fn run_step3(settings: &Step3Settings, scenario: FaultScenario, seed: u64) -
     }
     let _ = truth_hi;
     out.final_parameters = estimators.two_step();
+    out.kalman_changes = estimators.kalman_changes();
     out.seconds = start.elapsed().as_secs_f64();
     out
 }
