@@ -13,6 +13,7 @@ pub mod cli;
 pub mod dataio;
 pub mod edge_cloud;
 pub mod error;
+pub mod gap;
 pub mod linear_degradation;
 pub mod lockstep;
 pub mod output;
