@@ -136,9 +136,12 @@ pub enum Command {
         /// Base seed.
         #[arg(long, default_value_t = 2026)]
         seed: u64,
-        /// Only these catalogue effects (comma separated; no none/pair/unknown sets).
+        /// Only these catalogue effects for the single-effect sets (comma separated).
         #[arg(long, value_delimiter = ',')]
         only: Vec<String>,
+        /// Per plant: no-effect sets, pair sets, and sets per out-of-catalogue effect.
+        #[arg(long, default_value_t = 12)]
+        extra_sets: usize,
         /// Diagnose the labelled datasets in this folder instead of generating.
         #[arg(long)]
         datasets: Option<PathBuf>,
@@ -395,6 +398,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             ratios,
             seed,
             only,
+            extra_sets,
             datasets,
             write_datasets,
             out,
@@ -405,6 +409,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 ratios,
                 seed,
                 only,
+                extra_sets,
             };
             let started = Instant::now();
             let (_, text) = crate::gap::bench::run_bench(

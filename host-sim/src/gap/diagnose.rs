@@ -24,7 +24,7 @@ pub const EXPLAIN_SHRINK: f64 = 0.5;
 /// Below this shrink for the best single effect, pairs are tried.
 pub const PAIR_TRIGGER: f64 = 0.8;
 /// How many of the best single effects are combined into pairs.
-pub const PAIR_POOL: usize = 5;
+pub const PAIR_POOL: usize = 4;
 
 /// How a channel's noise level was obtained.
 #[derive(Clone, Debug, Serialize)]

@@ -409,15 +409,16 @@ impl<'a> Problem<'a> {
             Some(s) if s.len() == dims.len() => s.to_vec(),
             _ => dims.iter().map(|d| to_value(d, 0.5)).collect(),
         };
-        let passes = match (dims.len(), start.is_some()) {
-            (1, _) => 1,
-            (2, false) => 3,
-            _ => 2,
+        // From a start (pairs refined from their singles' fits): one coarser pass.
+        let (passes, grid, golden) = match (dims.len(), start.is_some()) {
+            (_, true) => (1, 7, 10),
+            (1, false) => (1, 13, 16),
+            _ => (2, 13, 16),
         };
         let mut best = self.cost_at(components, &dims, &theta);
         for _ in 0..passes {
             for i in 0..dims.len() {
-                let (value, cost) = self.line_search(components, &dims, &theta, i);
+                let (value, cost) = self.line_search(components, &dims, &theta, i, grid, golden);
                 if cost < best {
                     best = cost;
                     theta[i] = value;
@@ -466,39 +467,40 @@ impl<'a> Problem<'a> {
         })
     }
 
-    /// Coordinate `i`: a 13-point grid over its range, then golden-section refinement in the
-    /// bracket around the best grid point.
+    /// Coordinate `i`: a `grid`-point grid over its range, then `golden` golden-section
+    /// steps in the bracket around the best grid point.
     fn line_search(
         &self,
         components: &[Component],
         dims: &[Dim],
         theta: &[f64],
         i: usize,
+        grid: usize,
+        golden: usize,
     ) -> (f64, f64) {
-        const GRID: usize = 13;
         let d = &dims[i];
         let mut probe = theta.to_vec();
         let mut eval = |u: f64| {
             probe[i] = to_value(d, u);
             self.cost_at(components, dims, &probe)
         };
-        let costs: Vec<f64> = (0..GRID)
-            .map(|g| eval(g as f64 / (GRID - 1) as f64))
+        let costs: Vec<f64> = (0..grid)
+            .map(|g| eval(g as f64 / (grid - 1) as f64))
             .collect();
         let (g_best, &c_best) = costs
             .iter()
             .enumerate()
             .min_by(|a, b| a.1.total_cmp(b.1))
             .unwrap_or((0, &f64::INFINITY));
-        let step = 1.0 / (GRID - 1) as f64;
+        let step = 1.0 / (grid - 1) as f64;
         let mut a = (g_best as f64 - 1.0).max(0.0) * step;
-        let mut b = (g_best as f64 + 1.0).min((GRID - 1) as f64) * step;
+        let mut b = (g_best as f64 + 1.0).min((grid - 1) as f64) * step;
         let ratio = 0.5 * (5f64.sqrt() - 1.0);
         let mut x1 = b - ratio * (b - a);
         let mut x2 = a + ratio * (b - a);
         let mut f1 = eval(x1);
         let mut f2 = eval(x2);
-        for _ in 0..16 {
+        for _ in 0..golden {
             if f1 <= f2 {
                 b = x2;
                 x2 = x1;

@@ -25,6 +25,7 @@ pub mod meta;
 pub mod plant;
 pub mod report;
 pub mod stats;
+pub mod valve;
 pub mod wheel;
 
 pub use diagnose::{Diagnosis, diagnose_files, diagnose_recording};

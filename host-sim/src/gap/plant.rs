@@ -199,9 +199,10 @@ pub fn builtin_plant(name: &str) -> Option<Box<dyn GapPlant>> {
     match name {
         "reaction_wheel" => Some(Box::new(crate::gap::wheel::WheelGapPlant)),
         "dc_motor" => Some(Box::new(crate::gap::dc_motor::DcMotorPlant)),
+        "valve" => Some(Box::new(crate::gap::valve::ValveGapPlant)),
         _ => None,
     }
 }
 
 /// Names of the built-in plants (for error messages).
-pub const BUILTIN_PLANTS: &[&str] = &["reaction_wheel", "dc_motor"];
+pub const BUILTIN_PLANTS: &[&str] = &["reaction_wheel", "valve", "dc_motor"];

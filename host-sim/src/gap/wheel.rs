@@ -418,10 +418,10 @@ impl GapPlant for WheelGapPlant {
             } else {
                 0.0
             };
-            // Sub-steps keep RK4 stable for a fast driver (w_d h < 0.5) and let the limiter
-            // feedback follow the speed within a sample.
+            // Sub-steps keep RK4 accurate for a fast driver (w_d h <= 1, inside its
+            // stability limit 2.8) and let the limiter feedback follow the speed.
             let substeps = if on.lowpass {
-                (p.driver_bandwidth * dt / 0.5).ceil().max(1.0) as usize
+                (p.driver_bandwidth * dt).ceil().max(1.0) as usize
             } else if on.emf || on.limiter {
                 4
             } else {
