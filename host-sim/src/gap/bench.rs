@@ -102,12 +102,10 @@ impl Outcome {
             _ => self.top1(),
         }
     }
+    /// Both effects among the three best single effects, or the verdict is the pair.
     fn pair_in_top3(&self) -> bool {
-        let parts: Vec<&str> = self.top3.iter().flat_map(|e| e.split('+')).collect();
-        self.label
-            .effects
-            .iter()
-            .all(|e| parts.contains(&e.as_str()))
+        same_set(&self.verdict, &self.label.effects)
+            || self.label.effects.iter().all(|e| self.top3.contains(e))
     }
     fn localised(&self) -> bool {
         self.label.channel.as_deref() == Some(self.channel.as_str())

@@ -64,6 +64,9 @@ pub struct Diagnosis {
     pub location: crate::gap::analysis::Location,
     /// Every candidate, best score first.
     pub ranking: Vec<Evaluation>,
+    /// Pairs of the best single effects, fitted jointly when no single one explains the
+    /// gap (best score first; empty otherwise).
+    pub pairs: Vec<Evaluation>,
     /// Noise levels used.
     pub noise: Vec<NoiseLevel>,
     /// Effects the user's model already had.
@@ -283,7 +286,28 @@ pub fn diagnose_with(
         select: select.clone(),
     };
     let nominal = select_outputs(&nominal_full, &select);
-    let problem = Problem {
+    // How the replay depends on each measured initial value (zero for channels the plant
+    // does not initialise from the data).
+    let mut init_sensitivity = Vec::new();
+    for (c, (_, name)) in present.iter().enumerate() {
+        let step = 10.0 * sigma[c];
+        let mut perturbed = data.clone();
+        perturbed.initial_offsets.insert(name.clone(), step);
+        let Ok(sim) = wrapped.simulate(&base, &active, &perturbed) else {
+            continue;
+        };
+        let sens: Vec<Vec<f64>> = sim
+            .outputs
+            .iter()
+            .zip(&nominal.outputs)
+            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) / step).collect())
+            .collect();
+        let matters = sens.iter().flatten().any(|g| g.abs() > 1e-6);
+        if matters && sens.iter().flatten().all(|g| g.is_finite()) {
+            init_sensitivity.push((c, sens, sigma[c]));
+        }
+    }
+    let mut problem = Problem {
         plant: &wrapped,
         data: &data,
         base,
@@ -295,20 +319,24 @@ pub fn diagnose_with(
         sigma_dof,
         train: train.clone(),
         test,
-        nominal,
+        nominal: nominal.clone(),
+        nominal_raw: nominal,
+        init_sensitivity,
     };
+    problem.refit_nominal();
     let report = analyse(&problem);
-    let (verdict, ranking) = decide(&problem, &report);
+    let (verdict, ranking, pairs) = decide(&problem, &report);
     let overlays = overlays(
         &problem,
         &report,
-        ranking.iter().find(|e| e.effect == verdict),
+        ranking.iter().chain(&pairs).find(|e| e.effect == verdict),
     );
     Ok(Diagnosis {
         plant: plant.name().to_string(),
         verdict,
         location: report.location.clone(),
         ranking,
+        pairs,
         noise,
         sim_effects,
         samples: [
@@ -419,8 +447,13 @@ pub fn plant_data(recording: &Recording, dt: f64) -> PlantData {
     data
 }
 
-/// Fits every candidate and decides the verdict (see the constants above for the rule).
-pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluation>) {
+/// Fits every candidate and decides the verdict: `none` when no test rejects and no
+/// candidate beats the model by [`MIN_SCORE`]; else the best single effect when it explains
+/// the gap (score >= [`MIN_SCORE`], shrink >= [`EXPLAIN_SHRINK`]) and shrinks it by at least
+/// [`PAIR_TRIGGER`]; else the best pair when it explains the gap and beats the single by
+/// [`MIN_SCORE`] and 0.1 in shrink; else the single when it explains; else `unknown`.
+/// Returns the verdict, the single effects (best first) and the pairs tried.
+pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluation>, Vec<Evaluation>) {
     let singles: Vec<Component> = problem.single_candidates();
     let mut evaluated: Vec<Evaluation> = singles
         .par_iter()
@@ -431,13 +464,13 @@ pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluatio
     let significant =
         report.location.significant || evaluated.first().is_some_and(|e| e.score >= MIN_SCORE);
     let Some(best) = evaluated.first().cloned() else {
-        return ("unknown".into(), evaluated);
+        return ("unknown".into(), evaluated, Vec::new());
     };
     if !significant {
-        return ("none".into(), evaluated);
+        return ("none".into(), evaluated, Vec::new());
     }
     if explains(&best) && best.shrink >= PAIR_TRIGGER {
-        return (best.effect.clone(), evaluated);
+        return (best.effect.clone(), evaluated, Vec::new());
     }
     let pool: Vec<&Evaluation> = evaluated
         .iter()
@@ -457,27 +490,22 @@ pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluatio
             }
         }
     }
-    let fitted_pairs: Vec<Evaluation> = pairs
+    let mut fitted_pairs: Vec<Evaluation> = pairs
         .par_iter()
         .filter_map(|(c, s)| problem.fit(c, Some(s)))
         .collect();
-    let best_pair = fitted_pairs
-        .iter()
-        .max_by(|a, b| a.score.total_cmp(&b.score))
-        .cloned();
-    evaluated.extend(fitted_pairs);
-    evaluated.sort_by(|a, b| b.score.total_cmp(&a.score));
-    if let Some(pair) = best_pair
-        && explains(&pair)
+    fitted_pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
+    if let Some(pair) = fitted_pairs.first()
+        && explains(pair)
         && pair.score >= best.score + MIN_SCORE
         && pair.shrink >= best.shrink + 0.1
     {
-        return (pair.effect, evaluated);
+        return (pair.effect.clone(), evaluated, fitted_pairs);
     }
     if explains(&best) {
-        return (best.effect, evaluated);
+        return (best.effect, evaluated, fitted_pairs);
     }
-    ("unknown".into(), evaluated)
+    ("unknown".into(), evaluated, fitted_pairs)
 }
 
 fn overlays(problem: &Problem, report: &WhereReport, chosen: Option<&Evaluation>) -> Vec<Overlay> {

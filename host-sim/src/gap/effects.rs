@@ -177,8 +177,40 @@ pub struct Problem<'a> {
     pub train: Vec<bool>,
     /// Held-out samples.
     pub test: Vec<bool>,
-    /// The replay of the user's model.
+    /// The replay of the user's model, initial condition refitted (see [`Problem::predict`]).
     pub nominal: Simulation,
+    /// The replay of the user's model from the measured initial condition.
+    pub nominal_raw: Simulation,
+    /// Sensitivity of the replay to the initial value of each output channel that the
+    /// plant initialises from the data: `(channel, d outputs / d initial value, step)`.
+    pub init_sensitivity: Vec<(usize, Vec<Vec<f64>>, f64)>,
+}
+
+/// Solves the small symmetric system `a x = b` by Gaussian elimination with partial
+/// pivoting; `None` when singular.
+fn solve_small(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let n = b.len();
+    for col in 0..n {
+        let piv = (col..n).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if a[piv][col].abs() < 1e-300 {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        for row in col + 1..n {
+            let f = a[row][col] / a[col][col];
+            for k in col..n {
+                a[row][k] -= f * a[col][k];
+            }
+            b[row] -= f * b[col];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for row in (0..n).rev() {
+        let s: f64 = (row + 1..n).map(|k| a[row][k] * x[k]).sum();
+        x[row] = (b[row] - s) / a[row][row];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// A fitted and scored candidate.
@@ -260,8 +292,10 @@ impl<'a> Problem<'a> {
                         (a.min(v), b.max(v))
                     });
                     let span = (hi - lo).max(0.0);
-                    let (lo, hi, scale) =
-                        kind.range(amplitude, span, self.sigma[*ch], self.data.dt);
+                    let (lo, hi, scale) = match (kind, lattice_step(&self.measured[*ch])) {
+                        (GenericKind::Quantisation, Some(q)) => (0.98 * q, 1.02 * q, Scale::Linear),
+                        _ => kind.range(amplitude, span, self.sigma[*ch], self.data.dt),
+                    };
                     dims.push(Dim {
                         component: ci,
                         name: kind.param_name().to_string(),
@@ -275,6 +309,73 @@ impl<'a> Problem<'a> {
         dims
     }
 
+    /// Applies the generic components of `fitted` to a replay.
+    fn apply_generic(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
+        let mut out = sim.clone();
+        for (c, values) in fitted {
+            if let (Component::Generic(kind, ch), Some(&p)) = (c, values.first()) {
+                let y = &mut out.outputs[*ch];
+                *y = kind.apply(p, y, self.data.dt);
+            }
+        }
+        out
+    }
+
+    /// The replay from the measured initial condition, then the generic components, with
+    /// the initial condition refitted on the training samples (one Gauss-Newton step on the
+    /// linear sensitivity): the first measurement carries noise and, under a sensor effect
+    /// (bias, scale, saturation, ...), the effect itself, which a slow plant would carry
+    /// through the whole record.
+    fn with_refitted_start(&self, raw: Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
+        let base = self.apply_generic(&raw, fitted);
+        if self.init_sensitivity.is_empty() {
+            return base;
+        }
+        let shifted = |deltas: &[f64]| -> Simulation {
+            let mut s = raw.clone();
+            for ((_, sens, _), d) in self.init_sensitivity.iter().zip(deltas) {
+                for (out, sj) in s.outputs.iter_mut().zip(sens) {
+                    for (v, g) in out.iter_mut().zip(sj) {
+                        *v += d * g;
+                    }
+                }
+            }
+            self.apply_generic(&s, fitted)
+        };
+        let m = self.init_sensitivity.len();
+        let jac: Vec<Simulation> = (0..m)
+            .map(|i| {
+                let mut d = vec![0.0; m];
+                d[i] = self.init_sensitivity[i].2;
+                shifted(&d)
+            })
+            .collect();
+        let mut a = vec![vec![0.0; m]; m];
+        let mut b = vec![0.0; m];
+        for (j, y) in self.measured.iter().enumerate() {
+            let w = 1.0 / (self.sigma[j] * self.sigma[j]);
+            for k in 0..y.len() {
+                if !(self.train[k] && y[k].is_finite()) {
+                    continue;
+                }
+                let r = y[k] - base.outputs[j][k];
+                let g: Vec<f64> = (0..m)
+                    .map(|i| (jac[i].outputs[j][k] - base.outputs[j][k]) / self.init_sensitivity[i].2)
+                    .collect();
+                for p in 0..m {
+                    b[p] += w * g[p] * r;
+                    for q in 0..m {
+                        a[p][q] += w * g[p] * g[q];
+                    }
+                }
+            }
+        }
+        match solve_small(a, b) {
+            Some(delta) if delta.iter().all(|d| d.is_finite()) => shifted(&delta),
+            _ => base,
+        }
+    }
+
     /// Replays the model with the candidate's components at `values` (one vector per
     /// component, in `dims` order).
     pub fn predict(&self, fitted: &[(Component, Vec<f64>)]) -> Result<Simulation, String> {
@@ -282,8 +383,8 @@ impl<'a> Problem<'a> {
             .iter()
             .filter(|(c, _)| matches!(c, Component::Plant(_)))
             .collect();
-        let mut sim = if plant_parts.is_empty() {
-            self.nominal.clone()
+        let raw = if plant_parts.is_empty() {
+            self.nominal_raw.clone()
         } else {
             let mut params = self.base.clone();
             let mut active: Vec<&str> = self.sim_effects.iter().map(String::as_str).collect();
@@ -298,13 +399,12 @@ impl<'a> Problem<'a> {
             }
             self.plant.simulate(&params, &active, self.data)?
         };
-        for (c, values) in fitted {
-            if let (Component::Generic(kind, ch), Some(&p)) = (c, values.first()) {
-                let out = &mut sim.outputs[*ch];
-                *out = kind.apply(p, out, self.data.dt);
-            }
-        }
-        Ok(sim)
+        Ok(self.with_refitted_start(raw, fitted))
+    }
+
+    /// The user's model with its initial condition refitted (the baseline of every score).
+    pub fn refit_nominal(&mut self) {
+        self.nominal = self.with_refitted_start(self.nominal_raw.clone(), &[]);
     }
 
     /// Per-channel (sum of squared residuals, count) over the samples in `mask`.
@@ -522,6 +622,30 @@ impl<'a> Problem<'a> {
             (to_value(d, g_best as f64 * step), c_best)
         }
     }
+}
+
+/// The step of the lattice a quantised channel's values lie on: the smallest nonzero
+/// difference between consecutive samples, accepted when at least 90 % of the nonzero
+/// differences are integer multiples of it (to 1e-6) and it is not a float rounding step.
+pub fn lattice_step(y: &[f64]) -> Option<f64> {
+    let scale = y.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs()));
+    let diffs: Vec<f64> = y
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| d.is_finite() && *d > 1e-9 * scale.max(1e-300))
+        .collect();
+    if diffs.len() < 20 {
+        return None;
+    }
+    let q = diffs.iter().copied().fold(f64::INFINITY, f64::min);
+    let on_lattice = diffs
+        .iter()
+        .filter(|d| {
+            let r = *d / q;
+            (r - r.round()).abs() < 1e-6 * r.max(1.0)
+        })
+        .count();
+    (on_lattice as f64 >= 0.9 * diffs.len() as f64).then_some(q)
 }
 
 /// Maps `u` in [0, 1] to the parameter's range.

@@ -76,6 +76,9 @@ pub struct PlantData {
     /// Span (s) from the start over which [`PlantData::first_output`] fits a line to pin
     /// the initial condition below the noise (0: the first sample).
     pub initial_window: f64,
+    /// Offsets added to [`PlantData::first_output`] (the diagnoser perturbs the initial
+    /// condition with them to measure its effect on the replay).
+    pub initial_offsets: BTreeMap<String, f64>,
 }
 
 impl PlantData {
@@ -104,6 +107,11 @@ impl PlantData {
     /// (so the replay does not start off by one noise sample, which a slow plant would carry
     /// through the whole record); the first finite sample when the window holds fewer than 3.
     pub fn first_output(&self, name: &str) -> Option<f64> {
+        let offset = self.initial_offsets.get(name).copied().unwrap_or(0.0);
+        self.fitted_start(name).map(|v| v + offset)
+    }
+
+    fn fitted_start(&self, name: &str) -> Option<f64> {
         let y = self.output(name)?;
         let t0 = *self.t.first()?;
         let pts: Vec<(f64, f64)> = self

@@ -428,12 +428,18 @@ impl GapPlant for WheelGapPlant {
                 1
             };
             let h = dt / substeps as f64;
+            let algebraic = |current: &mut f64, speed: f64| {
+                for _ in 0..3 {
+                    *current = p.drive_gain * (v + w.feedback(*current, speed));
+                }
+            };
+            if !on.lowpass {
+                algebraic(&mut current, speed);
+            }
             let (i0, w0) = (current, speed);
-            for _ in 0..substeps {
-                if !on.lowpass {
-                    for _ in 0..3 {
-                        current = p.drive_gain * (v + w.feedback(current, speed));
-                    }
+            for sub in 0..substeps {
+                if !on.lowpass && sub > 0 {
+                    algebraic(&mut current, speed);
                 }
                 let (ci, cw) = (current, speed);
                 let (a1, b1) = w.rhs(ci, cw, visc, v, extra);
@@ -617,5 +623,45 @@ mod tests {
             .zip(&w)
             .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
         assert!(gap > 1.0, "coulomb friction must matter: {gap}");
+    }
+
+    #[test]
+    fn ripple_and_cogging_replay_with_the_measured_angle() {
+        let n = 3000;
+        let mut data = profile(n);
+        let mut truth = TruthWheel::new();
+        truth.effects = WheelEffects {
+            driver_lowpass: false,
+            emf_limiting: false,
+            speed_limiter: false,
+            coulomb_friction: false,
+            viscous_temperature: false,
+            torque_ripple: true,
+            cogging: true,
+            torque_noise: false,
+        };
+        truth.params.torque_ripple = 50.0;
+        truth.params.cogging = 1e-3;
+        truth.settle(3.0, 23.0);
+        let (mut i, mut w, mut a) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..n {
+            i.push(truth.current);
+            w.push(truth.speed);
+            a.push(truth.angle);
+            truth.step(data.inputs["command"][k], 23.0, 0.05);
+        }
+        data.outputs.insert("current".into(), i);
+        data.outputs.insert("speed".into(), w.clone());
+        data.inputs.insert("angle".into(), a);
+        let plant = WheelGapPlant;
+        let mut params = plant.default_params();
+        params.insert("torque_ripple".into(), 50.0);
+        params.insert("cogging".into(), 1e-3);
+        let sim = plant.simulate(&params, &["torque_ripple", "cogging"], &data).unwrap();
+        let err = sim.outputs[1].iter().zip(&w).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        let off = plant.simulate(&params, &[], &data).unwrap();
+        let effect = off.outputs[1].iter().zip(&w).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        assert!(effect > 5e-3, "{effect}");
+        assert!(err < 1e-3 * effect, "{err} vs {effect}");
     }
 }
