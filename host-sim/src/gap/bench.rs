@@ -783,11 +783,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
         .collect();
     out.extend(pairs);
     let unknown_jobs: Vec<(usize, f64, usize)> = (0..bp.unknown_effects().len())
-        .flat_map(|u| {
-            [2.0, 4.0, 8.0]
-                .into_iter()
-                .flat_map(move |r| (0..opts.seeds.min(2).max(1)).map(move |s| (u, r, s)))
-        })
+        .flat_map(|u| (0..extra_seeds).map(move |s| (u, [2.0, 4.0, 8.0][s % 3], s)))
         .collect();
     let unknowns: Vec<Dataset> = unknown_jobs
         .par_iter()

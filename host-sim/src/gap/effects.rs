@@ -504,6 +504,17 @@ impl<'a> Problem<'a> {
     /// Fits `components` (starting from `start` when given, else from the grid) and scores
     /// them on the held-out blocks.
     pub fn fit(&self, components: &[Component], start: Option<&[f64]>) -> Option<Evaluation> {
+        self.fit_from(components, start, 0)
+    }
+
+    /// [`Problem::fit`] that keeps the first `frozen` parameters at their start values
+    /// (the forward step of the pair search: the best single effect held, a second added).
+    pub fn fit_from(
+        &self,
+        components: &[Component],
+        start: Option<&[f64]>,
+        frozen: usize,
+    ) -> Option<Evaluation> {
         let dims = self.dims(components);
         let mut theta: Vec<f64> = match start {
             Some(s) if s.len() == dims.len() => s.to_vec(),
@@ -517,7 +528,7 @@ impl<'a> Problem<'a> {
         };
         let mut best = self.cost_at(components, &dims, &theta);
         for _ in 0..passes {
-            for i in 0..dims.len() {
+            for i in frozen.min(dims.len())..dims.len() {
                 let (value, cost) = self.line_search(components, &dims, &theta, i, grid, golden);
                 if cost < best {
                     best = cost;
