@@ -473,8 +473,8 @@ pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluatio
     if explains(&best) && best.shrink >= PAIR_TRIGGER {
         return (best.effect.clone(), evaluated, Vec::new());
     }
-    // Forward step: the best single effect held at its fit, every other candidate added
-    // and fitted on top; the best few pairs are then refined jointly.
+    // Forward step: every other candidate added to the best single effect, both fitted
+    // jointly from their single fits (one coarse pass); the best few pairs are refined.
     let first = best.fitted[0].0.clone();
     let first_values = flat_values(&best);
     let forward: Vec<Evaluation> = evaluated[1..]
@@ -486,7 +486,7 @@ pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluatio
         .filter_map(|e| {
             let mut start = first_values.clone();
             start.extend(flat_values(e));
-            problem.fit_from(&[first.clone(), e.fitted[0].0.clone()], Some(&start), first_values.len())
+            problem.fit(&[first.clone(), e.fitted[0].0.clone()], Some(&start))
         })
         .collect();
     let mut forward = forward;
