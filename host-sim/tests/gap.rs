@@ -65,7 +65,10 @@ fn gap_finds_coulomb_friction_in_wheel_data_and_writes_the_report() {
     let fitted = top["params"][0][1].as_f64().unwrap();
     assert!(fitted > 0.0 && fitted < 1e-3, "{fitted}");
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
-    assert!(html.matches("<svg").count() >= 4, "heat map, spectrum, ranking, overlay");
+    assert!(
+        html.matches("<svg").count() >= 4,
+        "heat map, spectrum, ranking, overlay"
+    );
     assert!(html.contains("coulomb_friction"));
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("| 1 | coulomb_friction |"), "{md}");
@@ -83,7 +86,10 @@ fn gap_says_none_on_nominal_motor_data() {
         extra_sets: 1,
     };
     let sets = generate("dc_motor", &opts).unwrap();
-    let none = sets.iter().find(|x| x.label.kind == CaseKind::None).unwrap();
+    let none = sets
+        .iter()
+        .find(|x| x.label.kind == CaseKind::None)
+        .unwrap();
     let o = run_one(none).unwrap();
     assert_eq!(o.verdict, "none", "top 3: {:?}", o.top3);
 }
@@ -113,39 +119,66 @@ fn bad_input_exits_2_and_says_which_and_where() {
 
     let (code, err) = bad(&dir, &good.csv, None);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("missing meta file") && err.contains(&m), "{err}");
+    assert!(
+        err.contains("missing meta file") && err.contains(&m),
+        "{err}"
+    );
 
     let (code, err) = bad(&dir, &good.csv, Some("plant = \"toaster\"\ndt = 0.01\n"));
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains(&format!("{m}:1:9: unknown plant `toaster`")), "{err}");
+    assert!(
+        err.contains(&format!("{m}:1:9: unknown plant `toaster`")),
+        "{err}"
+    );
 
     let text = "plant = \"dc_motor\"\ndt = 0.01\n[model]\nresistance = 2.0\nresistanse = 2.1\n";
     let (code, err) = bad(&dir, &good.csv, Some(text));
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains(&format!("{m}:5:1: unknown parameter `resistanse`")), "{err}");
+    assert!(
+        err.contains(&format!("{m}:5:1: unknown parameter `resistanse`")),
+        "{err}"
+    );
 
     let text = "plant = \"dc_motor\"\ndt = 0.01\nsim_effects = [\"brush_drop\", \"warp_drive\"]\n";
     let (code, err) = bad(&dir, &good.csv, Some(text));
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains(&format!("{m}:3:30: unknown effect `warp_drive`")), "{err}");
+    assert!(
+        err.contains(&format!("{m}:3:30: unknown effect `warp_drive`")),
+        "{err}"
+    );
 
     let text = "plant = \"dc_motor\"\ndt = 0.01\n[units]\n\"y:torque\" = \"N m\"\n";
     let (code, err) = bad(&dir, &good.csv, Some(text));
     assert_eq!(code, 2, "{err}");
     assert!(
-        err.contains(&format!("{m}:4:1: channel `y:torque` named in the meta file is not a column of {c}")),
+        err.contains(&format!(
+            "{m}:4:1: channel `y:torque` named in the meta file is not a column of {c}"
+        )),
         "{err}"
     );
 
     let no_voltage = good.csv.replacen("u:voltage", "u:volts", 1);
     let (code, err) = bad(&dir, &no_voltage, Some(&good.meta));
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains(&format!("{c}:1:1: plant `dc_motor` needs the input column `u:voltage`")), "{err}");
+    assert!(
+        err.contains(&format!(
+            "{c}:1:1: plant `dc_motor` needs the input column `u:voltage`"
+        )),
+        "{err}"
+    );
 
-    let short: String = good.csv.lines().take(51).map(|l| format!("{l}\n")).collect();
+    let short: String = good
+        .csv
+        .lines()
+        .take(51)
+        .map(|l| format!("{l}\n"))
+        .collect();
     let (code, err) = bad(&dir, &short, Some(&good.meta));
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains(&format!("{c}:51:1: too little data to split: 50 samples")), "{err}");
+    assert!(
+        err.contains(&format!("{c}:51:1: too little data to split: 50 samples")),
+        "{err}"
+    );
 }
 
 #[test]
@@ -166,7 +199,12 @@ fn small_gap_bench_attributes_localises_and_rejects() {
         extra_sets: 1,
     };
     let sets = generate("dc_motor", &opts).unwrap();
-    assert_eq!(sets.iter().filter(|d| d.label.kind == CaseKind::Single).count(), 4);
+    assert_eq!(
+        sets.iter()
+            .filter(|d| d.label.kind == CaseKind::Single)
+            .count(),
+        4
+    );
     let outcomes: Vec<_> = sets.iter().map(|d| run_one(d).unwrap()).collect();
     let sc = score(&outcomes, |r| r >= 2.0);
     assert_eq!(sc.top1, 1.0, "{outcomes:#?}");

@@ -287,10 +287,13 @@ pub fn analyse(problem: &Problem) -> WhereReport {
     // A rejected test counts only on a channel whose residual exceeds the noise level
     // overall: structure far below the noise (e.g. integration-scheme differences on
     // noise-free data) is not a gap.
-    let overall: Vec<(String, f64)> = per_channel.iter().map(|f| (f.channel.clone(), f.overall)).collect();
-    let significant = tests.iter().any(|t| {
-        t.p_adjusted < ALPHA && overall.iter().any(|(c, v)| *c == t.channel && *v > 1.0)
-    });
+    let overall: Vec<(String, f64)> = per_channel
+        .iter()
+        .map(|f| (f.channel.clone(), f.overall))
+        .collect();
+    let significant = tests
+        .iter()
+        .any(|t| t.p_adjusted < ALPHA && overall.iter().any(|(c, v)| *c == t.channel && *v > 1.0));
     let strongest_test = tests
         .iter()
         .min_by(|a, b| {

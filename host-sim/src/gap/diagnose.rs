@@ -238,7 +238,7 @@ pub fn diagnose_with(
             ),
         });
     }
-    let train: Vec<bool> = (0..n).map(|k| (k * BLOCKS / n) % 2 == 0).collect();
+    let train: Vec<bool> = (0..n).map(|k| (k * BLOCKS / n).is_multiple_of(2)).collect();
     let test: Vec<bool> = train.iter().map(|b| !b).collect();
     let mut sigma = Vec::new();
     let mut sigma_dof = Vec::new();
@@ -453,7 +453,10 @@ pub fn plant_data(recording: &Recording, dt: f64) -> PlantData {
 /// [`PAIR_TRIGGER`]; else the best pair when it explains the gap and beats the single by
 /// [`MIN_SCORE`] and 0.1 in shrink; else the single when it explains; else `unknown`.
 /// Returns the verdict, the single effects (best first) and the pairs tried.
-pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluation>, Vec<Evaluation>) {
+pub fn decide(
+    problem: &Problem,
+    report: &WhereReport,
+) -> (String, Vec<Evaluation>, Vec<Evaluation>) {
     let singles: Vec<Component> = problem.single_candidates();
     let mut evaluated: Vec<Evaluation> = singles
         .par_iter()
@@ -467,7 +470,11 @@ pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluatio
     if !report.location.significant {
         // No test sees more than noise: a candidate may still explain a small gap the tests
         // missed, but `unknown` needs a significant gap.
-        let verdict = if explains(&best) { best.effect.clone() } else { "none".into() };
+        let verdict = if explains(&best) {
+            best.effect.clone()
+        } else {
+            "none".into()
+        };
         return (verdict, evaluated, Vec::new());
     }
     if explains(&best) && best.shrink >= PAIR_TRIGGER {
@@ -494,7 +501,12 @@ pub fn decide(problem: &Problem, report: &WhereReport) -> (String, Vec<Evaluatio
     let pairs: Vec<(Vec<Component>, Vec<f64>)> = forward
         .iter()
         .take(PAIR_POOL)
-        .map(|e| (e.fitted.iter().map(|(c, _)| c.clone()).collect(), flat_values(e)))
+        .map(|e| {
+            (
+                e.fitted.iter().map(|(c, _)| c.clone()).collect(),
+                flat_values(e),
+            )
+        })
         .collect();
     let mut fitted_pairs: Vec<Evaluation> = pairs
         .par_iter()

@@ -199,8 +199,9 @@ fn solve_small(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
         b.swap(col, piv);
         for row in col + 1..n {
             let f = a[row][col] / a[col][col];
-            for k in col..n {
-                a[row][k] -= f * a[col][k];
+            let pivot_row = a[col].clone();
+            for (v, p) in a[row].iter_mut().zip(&pivot_row).skip(col) {
+                *v -= f * p;
             }
             b[row] -= f * b[col];
         }
@@ -354,13 +355,15 @@ impl<'a> Problem<'a> {
         let mut b = vec![0.0; m];
         for (j, y) in self.measured.iter().enumerate() {
             let w = 1.0 / (self.sigma[j] * self.sigma[j]);
-            for k in 0..y.len() {
-                if !(self.train[k] && y[k].is_finite()) {
+            for (k, &yk) in y.iter().enumerate() {
+                if !(self.train[k] && yk.is_finite()) {
                     continue;
                 }
-                let r = y[k] - base.outputs[j][k];
+                let r = yk - base.outputs[j][k];
                 let g: Vec<f64> = (0..m)
-                    .map(|i| (jac[i].outputs[j][k] - base.outputs[j][k]) / self.init_sensitivity[i].2)
+                    .map(|i| {
+                        (jac[i].outputs[j][k] - base.outputs[j][k]) / self.init_sensitivity[i].2
+                    })
                     .collect();
                 for p in 0..m {
                     b[p] += w * g[p] * r;
@@ -641,7 +644,10 @@ impl<'a> Problem<'a> {
 /// difference between consecutive samples, accepted when at least 90 % of the nonzero
 /// differences are integer multiples of it (to 1e-6) and it is not a float rounding step.
 pub fn lattice_step(y: &[f64]) -> Option<f64> {
-    let scale = y.iter().filter(|v| v.is_finite()).fold(0.0f64, |m, v| m.max(v.abs()));
+    let scale = y
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
     let diffs: Vec<f64> = y
         .windows(2)
         .map(|w| (w[1] - w[0]).abs())

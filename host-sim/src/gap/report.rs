@@ -97,7 +97,11 @@ pub fn markdown(d: &Diagnosis) -> String {
     if !d.pairs.is_empty() {
         s.push_str("\n## Pairs tried (held-out)\n\n| effect | score (nats) | gap after | shrink |\n|---|---|---|---|\n");
         for e in &d.pairs {
-            let _ = writeln!(s, "| {} | {:.1} | {:.3} | {:.3} |", e.effect, e.score, e.gap_after, e.shrink);
+            let _ = writeln!(
+                s,
+                "| {} | {:.1} | {:.3} | {:.3} |",
+                e.effect, e.score, e.gap_after, e.shrink
+            );
         }
     }
     s.push_str("\n## Residual per channel and regime (mean squared standardised residual; 1 = noise)\n\n| channel | regime | samples | NIS |\n|---|---|---|---|\n");

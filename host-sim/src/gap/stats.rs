@@ -13,7 +13,7 @@ pub fn normal_sf(z: f64) -> f64 {
 /// Regularised upper incomplete gamma `Q(a, x)` (Numerical Recipes: series below `a + 1`,
 /// Lentz continued fraction above).
 pub fn gamma_q(a: f64, x: f64) -> f64 {
-    if !(a > 0.0) || !x.is_finite() {
+    if a.is_nan() || a <= 0.0 || !x.is_finite() {
         return if x.is_infinite() && x > 0.0 { 0.0 } else { 1.0 };
     }
     if x <= 0.0 {
@@ -69,7 +69,7 @@ pub fn chi2_sf(x: f64, dof: f64) -> f64 {
 /// itself was estimated with `reference_dof` effective degrees of freedom (infinite when
 /// declared). Normal approximation of the log of an F ratio: `var ln F = 2/n + 2/m`.
 pub fn variance_ratio_p(ratio: f64, n: f64, reference_dof: f64) -> f64 {
-    if !(ratio > 0.0) || n < 1.0 {
+    if ratio.is_nan() || ratio <= 0.0 || n < 1.0 {
         return 1.0;
     }
     let var = 2.0 / n

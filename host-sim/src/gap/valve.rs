@@ -13,8 +13,7 @@
 //! without choking to start from does not exist in this project.
 
 use crate::gap::plant::{
-    EffectSpec, FitRange, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation,
-    param,
+    EffectSpec, FitRange, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
 };
 use nalgebra::SVector;
 use prognos_core::plants::valve::{Contact, Integrator, NU, NX, ValveParams, idx};
@@ -26,14 +25,46 @@ pub struct ValveGapPlant;
 
 /// Parameters with defaults (progpy's `PneumaticValveBase`, undamaged).
 pub const VALVE_PARAMETERS: &[ParamSpec] = &[
-    ParamSpec { name: "friction", default: 6000.0, doc: "friction coefficient r (N s/m), friction_increase" },
-    ParamSpec { name: "spring", default: 48000.0, doc: "spring constant k (N/m), spring_weakening" },
-    ParamSpec { name: "internal_leak_area", default: 0.0, doc: "A_i (m^2), internal_leak" },
-    ParamSpec { name: "top_leak_area", default: 0.0, doc: "A_et (m^2), top_external_leak" },
-    ParamSpec { name: "bottom_leak_area", default: 0.0, doc: "A_eb (m^2), bottom_external_leak" },
-    ParamSpec { name: "seal_stiffness", default: 1.0e9, doc: "k_c (N/m) of the flexible seals, seal_contact" },
-    ParamSpec { name: "supply_pressure", default: 5.272_420_892_278_395e6, doc: "p_s (Pa)" },
-    ParamSpec { name: "progpy_euler", default: 0.0, doc: "1: progpy's explicit Euler; 0: the semi-implicit scheme" },
+    ParamSpec {
+        name: "friction",
+        default: 6000.0,
+        doc: "friction coefficient r (N s/m), friction_increase",
+    },
+    ParamSpec {
+        name: "spring",
+        default: 48000.0,
+        doc: "spring constant k (N/m), spring_weakening",
+    },
+    ParamSpec {
+        name: "internal_leak_area",
+        default: 0.0,
+        doc: "A_i (m^2), internal_leak",
+    },
+    ParamSpec {
+        name: "top_leak_area",
+        default: 0.0,
+        doc: "A_et (m^2), top_external_leak",
+    },
+    ParamSpec {
+        name: "bottom_leak_area",
+        default: 0.0,
+        doc: "A_eb (m^2), bottom_external_leak",
+    },
+    ParamSpec {
+        name: "seal_stiffness",
+        default: 1.0e9,
+        doc: "k_c (N/m) of the flexible seals, seal_contact",
+    },
+    ParamSpec {
+        name: "supply_pressure",
+        default: 5.272_420_892_278_395e6,
+        doc: "p_s (Pa)",
+    },
+    ParamSpec {
+        name: "progpy_euler",
+        default: 0.0,
+        doc: "1: progpy's explicit Euler; 0: the semi-implicit scheme",
+    },
 ];
 
 /// The valve's own catalogue.
@@ -41,16 +72,57 @@ pub fn valve_effects() -> Vec<EffectSpec> {
     let one = |name: &'static str, doc: &'static str, p: &'static str, lo, hi| EffectSpec {
         name,
         doc,
-        fit: vec![FitRange { name: p, lo, hi, scale: Scale::Log }],
+        fit: vec![FitRange {
+            name: p,
+            lo,
+            hi,
+            scale: Scale::Log,
+        }],
         needs_inputs: Vec::new(),
     };
     vec![
-        one("friction_increase", "friction coefficient r departs from the model's", "friction", 1.0e3, 1.0e5),
-        one("spring_weakening", "spring constant k departs from the model's", "spring", 1.0e3, 1.0e5),
-        one("internal_leak", "leak across the piston, area A_i", "internal_leak_area", 1e-10, 1e-4),
-        one("top_external_leak", "leak from the top chamber, area A_et", "top_leak_area", 1e-10, 1e-4),
-        one("bottom_external_leak", "leak from the bottom chamber, area A_eb", "bottom_leak_area", 1e-10, 1e-4),
-        one("seal_contact", "flexible end seals of stiffness k_c instead of hard stops", "seal_stiffness", 1e6, 1e11),
+        one(
+            "friction_increase",
+            "friction coefficient r departs from the model's",
+            "friction",
+            1.0e3,
+            1.0e5,
+        ),
+        one(
+            "spring_weakening",
+            "spring constant k departs from the model's",
+            "spring",
+            1.0e3,
+            1.0e5,
+        ),
+        one(
+            "internal_leak",
+            "leak across the piston, area A_i",
+            "internal_leak_area",
+            1e-10,
+            1e-4,
+        ),
+        one(
+            "top_external_leak",
+            "leak from the top chamber, area A_et",
+            "top_leak_area",
+            1e-10,
+            1e-4,
+        ),
+        one(
+            "bottom_external_leak",
+            "leak from the bottom chamber, area A_eb",
+            "bottom_leak_area",
+            1e-10,
+            1e-4,
+        ),
+        one(
+            "seal_contact",
+            "flexible end seals of stiffness k_c instead of hard stops",
+            "seal_stiffness",
+            1e6,
+            1e11,
+        ),
     ]
 }
 
@@ -75,16 +147,32 @@ impl GapPlant for ValveGapPlant {
         valve_effects()
     }
 
-    fn simulate(&self, params: &Params, active: &[&str], data: &PlantData) -> Result<Simulation, String> {
+    fn simulate(
+        &self,
+        params: &Params,
+        active: &[&str],
+        data: &PlantData,
+    ) -> Result<Simulation, String> {
         let g = |n: &str| param(params, n);
         let mut vp = ValveParams::<f64>::progpy();
         vp.p_supply = g("supply_pressure");
-        vp.integrator = if g("progpy_euler") >= 0.5 { Integrator::ProgpyEuler } else { Integrator::SemiImplicit };
+        vp.integrator = if g("progpy_euler") >= 0.5 {
+            Integrator::ProgpyEuler
+        } else {
+            Integrator::SemiImplicit
+        };
         if active.contains(&"seal_contact") {
-            vp.contact = Contact::Seal { k_c: g("seal_stiffness") };
+            vp.contact = Contact::Seal {
+                k_c: g("seal_stiffness"),
+            };
         }
         let input = |name: &str| data.input(name).ok_or(format!("missing u:{name}"));
-        let (pl, pr, top, bottom) = (input("pl")?, input("pr")?, input("top_port_supply")?, input("bottom_port_supply")?);
+        let (pl, pr, top, bottom) = (
+            input("pl")?,
+            input("pr")?,
+            input("top_port_supply")?,
+            input("bottom_port_supply")?,
+        );
         let u_at = |k: usize| -> SVector<f64, NU> {
             let port = |on: f64| if on >= 0.5 { vp.p_supply } else { vp.p_atm };
             SVector::from([pl[k], pr[k], port(top[k]), port(bottom[k])])
@@ -102,7 +190,7 @@ impl GapPlant for ValveGapPlant {
         s[idx::A_ET] = g("top_leak_area");
         s[idx::A_EB] = g("bottom_leak_area");
         let n = data.len();
-        let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(n); 4];
+        let mut out: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(n)).collect();
         let mut velocity = Vec::with_capacity(n);
         for k in 0..n {
             let o = vp.outputs(&s, &u_at(k));
@@ -121,24 +209,54 @@ impl GapPlant for ValveGapPlant {
         let mut states = BTreeMap::new();
         states.insert("x".to_string(), out[0].clone());
         states.insert("v".to_string(), velocity);
-        Ok(Simulation { outputs: out, states })
+        Ok(Simulation {
+            outputs: out,
+            states,
+        })
     }
 
     fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {
         let n = data.len();
         let x = &nominal.outputs[0];
         let l_s = 0.0381;
-        let open_cmd = data.input("bottom_port_supply").map_or(vec![false; n], |b| b.iter().map(|v| *v >= 0.5).collect());
-        let v = nominal.states.get("v").cloned().unwrap_or_else(|| vec![0.0; n]);
+        let open_cmd = data
+            .input("bottom_port_supply")
+            .map_or(vec![false; n], |b| b.iter().map(|v| *v >= 0.5).collect());
+        let v = nominal
+            .states
+            .get("v")
+            .cloned()
+            .unwrap_or_else(|| vec![0.0; n]);
         let mask = |f: &dyn Fn(usize) -> bool| (0..n).map(f).collect::<Vec<bool>>();
         vec![
-            Regime { label: "opening".into(), mask: mask(&|k| open_cmd[k] && x[k] < l_s - 1e-3) },
-            Regime { label: "closing".into(), mask: mask(&|k| !open_cmd[k] && x[k] > 1e-3) },
-            Regime { label: "open".into(), mask: mask(&|k| x[k] >= l_s - 1e-3) },
-            Regime { label: "closed".into(), mask: mask(&|k| x[k] <= 1e-3) },
-            Regime { label: "moving".into(), mask: mask(&|k| v[k].abs() > 1e-4) },
-            Regime { label: "open_command".into(), mask: mask(&|k| open_cmd[k]) },
-            Regime { label: "close_command".into(), mask: mask(&|k| !open_cmd[k]) },
+            Regime {
+                label: "opening".into(),
+                mask: mask(&|k| open_cmd[k] && x[k] < l_s - 1e-3),
+            },
+            Regime {
+                label: "closing".into(),
+                mask: mask(&|k| !open_cmd[k] && x[k] > 1e-3),
+            },
+            Regime {
+                label: "open".into(),
+                mask: mask(&|k| x[k] >= l_s - 1e-3),
+            },
+            Regime {
+                label: "closed".into(),
+                mask: mask(&|k| x[k] <= 1e-3),
+            },
+            Regime {
+                label: "moving".into(),
+                mask: mask(&|k| v[k].abs() > 1e-4),
+            },
+            Regime {
+                label: "open_command".into(),
+                mask: mask(&|k| open_cmd[k]),
+            },
+            Regime {
+                label: "close_command".into(),
+                mask: mask(&|k| !open_cmd[k]),
+            },
         ]
     }
 }

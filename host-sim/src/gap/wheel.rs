@@ -513,11 +513,11 @@ impl GapPlant for WheelGapPlant {
         let command = data.input("command").unwrap_or(&[]);
         let mut since_step = vec![f64::INFINITY; n];
         let mut last = f64::NEG_INFINITY;
-        for k in 0..n {
+        for (k, since) in since_step.iter_mut().enumerate() {
             if k > 0 && command.get(k) != command.get(k - 1) {
                 last = data.t[k];
             }
-            since_step[k] = data.t[k] - last;
+            *since = data.t[k] - last;
         }
         let mask = |f: &dyn Fn(usize) -> bool| (0..n).map(f).collect::<Vec<bool>>();
         let mut out = vec![
@@ -657,10 +657,18 @@ mod tests {
         let mut params = plant.default_params();
         params.insert("torque_ripple".into(), 50.0);
         params.insert("cogging".into(), 1e-3);
-        let sim = plant.simulate(&params, &["torque_ripple", "cogging"], &data).unwrap();
-        let err = sim.outputs[1].iter().zip(&w).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        let sim = plant
+            .simulate(&params, &["torque_ripple", "cogging"], &data)
+            .unwrap();
+        let err = sim.outputs[1]
+            .iter()
+            .zip(&w)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
         let off = plant.simulate(&params, &[], &data).unwrap();
-        let effect = off.outputs[1].iter().zip(&w).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        let effect = off.outputs[1]
+            .iter()
+            .zip(&w)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
         assert!(effect > 5e-3, "{effect}");
         assert!(err < 1e-3 * effect, "{err} vs {effect}");
     }
