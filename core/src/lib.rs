@@ -13,7 +13,8 @@
         clippy::unwrap_used,
         clippy::expect_used,
         clippy::panic,
-        clippy::indexing_slicing
+        clippy::indexing_slicing,
+        clippy::arithmetic_side_effects
     )
 )]
 
@@ -22,6 +23,7 @@ extern crate std;
 
 pub mod diagnose;
 pub mod error;
+pub mod fastmath;
 pub mod filter;
 pub mod health;
 pub mod learn;

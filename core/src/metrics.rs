@@ -14,7 +14,7 @@ pub fn rmspe<T: Real>(estimates: &[T], truth: &[T]) -> Option<T> {
         if e.finite() && t.finite() && t != T::zero() {
             let r = (e - t) / t;
             acc += r * r;
-            n += 1;
+            n = n.saturating_add(1);
         }
     }
     (n > 0).then(|| cast::<T>(100.0) * (acc / cast(n as f64)).sqrt())
@@ -148,7 +148,7 @@ pub fn mean_absolute_percentage_error<T: Real>(true_rul: &[T], predicted: &[T]) 
     for (&t, &p) in true_rul.iter().zip(predicted) {
         if t != T::zero() && t.finite() && p.finite() {
             acc += cast::<T>(100.0) * ((t - p) / t).abs();
-            n += 1;
+            n = n.saturating_add(1);
         }
     }
     (n > 0).then(|| acc / cast(n as f64))
@@ -159,7 +159,7 @@ fn mean_of<T: Real>(a: &[T], b: &[T], f: impl Fn(T, T) -> T) -> Option<T> {
     for (&t, &p) in a.iter().zip(b) {
         if t.finite() && p.finite() {
             acc += f(t - p, t);
-            n += 1;
+            n = n.saturating_add(1);
         }
     }
     (n > 0).then(|| acc / cast(n as f64))

@@ -4,13 +4,11 @@
 use crate::real::{Real, cast};
 use rand_core::Rng;
 
-/// Uniform variate on [0, 1) with 53 random bits (f64) or 24 (f32 after rounding).
+/// Uniform variate on [0, 1) from the top 53 bits of one 64-bit draw (f64) or the top 24
+/// (f32, converted in single precision: no software double on the M4F).
 #[inline]
 pub fn uniform01<T: Real, R: Rng + ?Sized>(rng: &mut R) -> T {
-    let bits = rng.next_u64() >> 11;
-    let u = bits as f64 * (1.0 / (1u64 << 53) as f64);
-    let v: T = cast(u);
-    // f32 rounding can give exactly 1.0; keep the half-open interval.
+    let v = T::unit_from_bits(rng.next_u64());
     if v >= T::one() {
         T::one() - T::EPSILON
     } else {
@@ -21,8 +19,7 @@ pub fn uniform01<T: Real, R: Rng + ?Sized>(rng: &mut R) -> T {
 /// Uniform variate on the open interval (0, 1), safe for logarithms.
 #[inline]
 pub fn uniform_open01<T: Real, R: Rng + ?Sized>(rng: &mut R) -> T {
-    let bits = (rng.next_u64() >> 11) as f64 + 0.5;
-    cast(bits * (1.0 / (1u64 << 53) as f64))
+    T::open_unit_from_bits(rng.next_u64())
 }
 
 /// Standard normal variate by Marsaglia's polar method (no trigonometry, which is costly on

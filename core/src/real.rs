@@ -16,6 +16,20 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     fn finite(self) -> bool;
     /// True for NaN.
     fn nan(self) -> bool;
+    /// Sine for hot paths: single-precision [`crate::fastmath`] in f32, the ordinary `sin` in
+    /// f64 (so that host results are unchanged).
+    fn fast_sin(self) -> Self;
+    /// Cosine for hot paths (see [`Real::fast_sin`]).
+    fn fast_cos(self) -> Self;
+    /// `e^x` for hot paths (see [`Real::fast_sin`]).
+    fn fast_exp(self) -> Self;
+    /// Hyperbolic tangent for hot paths (see [`Real::fast_sin`]).
+    fn fast_tanh(self) -> Self;
+    /// A uniform value in [0, 1) from the top bits of a 64-bit random draw (as many bits as
+    /// the mantissa holds, converted without leaving the type's precision).
+    fn unit_from_bits(bits: u64) -> Self;
+    /// A uniform value in (0, 1) from the top bits of a 64-bit random draw.
+    fn open_unit_from_bits(bits: u64) -> Self;
 }
 
 impl Real for f64 {
@@ -34,6 +48,30 @@ impl Real for f64 {
     fn nan(self) -> bool {
         self.is_nan()
     }
+    #[inline]
+    fn fast_sin(self) -> Self {
+        nalgebra::ComplexField::sin(self)
+    }
+    #[inline]
+    fn fast_cos(self) -> Self {
+        nalgebra::ComplexField::cos(self)
+    }
+    #[inline]
+    fn fast_exp(self) -> Self {
+        nalgebra::ComplexField::exp(self)
+    }
+    #[inline]
+    fn fast_tanh(self) -> Self {
+        nalgebra::ComplexField::tanh(self)
+    }
+    #[inline]
+    fn unit_from_bits(bits: u64) -> Self {
+        (bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+    #[inline]
+    fn open_unit_from_bits(bits: u64) -> Self {
+        ((bits >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
+    }
 }
 
 impl Real for f32 {
@@ -51,6 +89,32 @@ impl Real for f32 {
     #[inline]
     fn nan(self) -> bool {
         self.is_nan()
+    }
+    #[inline]
+    fn fast_sin(self) -> Self {
+        crate::fastmath::sin(self)
+    }
+    #[inline]
+    fn fast_cos(self) -> Self {
+        crate::fastmath::cos(self)
+    }
+    #[inline]
+    fn fast_exp(self) -> Self {
+        crate::fastmath::exp(self)
+    }
+    #[inline]
+    fn fast_tanh(self) -> Self {
+        crate::fastmath::tanh(self)
+    }
+    #[inline]
+    fn unit_from_bits(bits: u64) -> Self {
+        // 24 bits: exact in f32, at most 1 - 2^-24.
+        ((bits >> 40) as u32) as f32 * (1.0 / (1u32 << 24) as f32)
+    }
+    #[inline]
+    fn open_unit_from_bits(bits: u64) -> Self {
+        // 23 bits plus a half: exact in f32, within [2^-24, 1 - 2^-24].
+        (((bits >> 41) as u32) as f32 + 0.5) * (1.0 / (1u32 << 23) as f32)
     }
 }
 

@@ -70,7 +70,7 @@ pub fn symmetrise<T: Real, const N: usize>(m: &mut SMatrix<T, N, N>) -> bool {
     let tol = scale * T::EPSILON.sqrt() * cast(0.01);
     let mut significant = false;
     for i in 0..N {
-        for j in (i + 1)..N {
+        for j in i.saturating_add(1)..N {
             let (a, b) = (m[(i, j)], m[(j, i)]);
             if (a - b).abs() > tol {
                 significant = true;

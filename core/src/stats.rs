@@ -116,7 +116,7 @@ pub fn summarise<T: Real>(samples: &mut [(T, T)]) -> Option<Summary<T>> {
             .is_some_and(|s| s.0.finite() && s.1.finite() && s.1 >= T::zero());
         if ok {
             samples.swap(n, i);
-            n += 1;
+            n = n.saturating_add(1);
         }
     }
     let usable = samples.get_mut(..n)?;

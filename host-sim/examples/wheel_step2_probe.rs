@@ -11,24 +11,24 @@ fn main() {
     ] {
         let t0 = std::time::Instant::now();
         let o = run_step2(&Step2Settings::new(Method::Apf), sc, seed);
-        for k in (0..o.time.len()).step_by(6) {
+        for k in (0..o.time.len()).filter(|k| *k < 12 || (38..52).contains(k) || k % 10 == 0) {
             println!(
-                "{:.0} T {:.2}/{:.2} two ({:.2},{:.3}) one ({:.2},{:.3}) truth ({:.1},{:.3})",
+                "{:.0} T {:.2}/{:.2} two ({:.2},{:.3}) kf ({:.2},{:.3}) truth ({:.1},{:.3})",
                 o.time[k] / 60.0,
                 o.temperature[k].0,
                 o.temperature[k].1,
                 o.two_step[k].0,
                 o.two_step[k].1 * 1e6,
-                o.one_step[k].0,
-                o.one_step[k].1 * 1e6,
+                o.kalman[k].0,
+                o.kalman[k].1 * 1e6,
                 o.truth[k].0,
                 o.truth[k].1 * 1e6
             );
         }
         println!(
-            "{sc:?} two {:?} one {:?} {:.1}s",
+            "{sc:?} two {:?} kf {:?} {:.1}s",
             o.two_step_rmspe,
-            o.one_step_rmspe,
+            o.kalman_rmspe,
             t0.elapsed().as_secs_f64()
         );
     }

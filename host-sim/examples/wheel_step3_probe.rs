@@ -17,8 +17,8 @@ fn main() {
         s.days = days;
         let o = run_step3(&s, sc, seed);
         println!(
-            "{sc:?} {:?} final {:?} {:.1}s",
-            o.predictions, o.final_parameters, o.seconds
+            "{sc:?} two {:?} kf {:?} final {:?} {:.1}s",
+            o.predictions, o.kalman_predictions, o.final_parameters, o.seconds
         );
     }
 }

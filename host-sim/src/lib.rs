@@ -6,6 +6,7 @@
 //! (wrapping the core pipeline), usually [`lockstep::ChannelSensor`] and
 //! [`lockstep::ProfileInputs`] from the scenario, and a [`registry::System`] that builds
 //! them; then add it to [`registry::Registry::builtin`].
+#![forbid(unsafe_code)]
 
 pub mod bearing;
 pub mod campaign;

@@ -211,7 +211,9 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
         if !all_finite(y) {
             return Err(Error::NonFiniteMeasurement);
         }
-        let saved = self.ukf.clone();
+        // The estimate to roll back to on error (x and P only: the rest is restored by the
+        // code that changes it, and a full copy of the UKF would double its stack use).
+        let saved = (*self.ukf.state(), *self.ukf.covariance());
         let mut flags = Flags::NONE;
         // Eq. 6: the detector fired on this sample, so the posterior of the previous step is
         // enhanced before it meets the measurement that carries the sudden change.
@@ -278,7 +280,7 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
         let predict_flags = match predicted {
             Ok(f) => f,
             Err(e) => {
-                self.ukf = saved;
+                self.ukf.restore_estimate(saved.0, saved.1);
                 return Err(e);
             }
         };
@@ -301,7 +303,7 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
                 }
             }
             Err(e) => {
-                self.ukf = saved;
+                self.ukf.restore_estimate(saved.0, saved.1);
                 return Err(e);
             }
         };
@@ -324,8 +326,8 @@ impl<T: Real, const NX: usize, const NS: usize, const NY: usize, const L: usize>
                 *e = update.innovation;
                 *c = correction;
             }
-            self.head = (self.head + 1) % L;
-            self.filled = (self.filled + 1).min(L);
+            self.head = self.head.saturating_add(1).checked_rem(L).unwrap_or(0);
+            self.filled = self.filled.saturating_add(1).min(L);
         }
         if self.config.mode != Adaptation::None && self.filled == L {
             flags.insert(self.match_covariances(&update.innovation_cov));

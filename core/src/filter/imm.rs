@@ -5,7 +5,7 @@
 
 use crate::error::Error;
 use crate::real::{Real, all_finite, cast};
-use crate::safeguard::{log_sum_exp, symmetrise};
+use crate::safeguard::{Flags, log_sum_exp, symmetrise};
 use nalgebra::{SMatrix, SVector};
 
 /// What the IMM needs from one mode's filter.
@@ -23,8 +23,14 @@ pub trait ModeFilter<T: Real, const NX: usize>: Clone {
 /// What one IMM step did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ImmReport<T: Real, const K: usize> {
+    /// `ln N(e_j; 0, S_j)` of each mode's innovation (the per-mode test statistic).
     pub log_likelihoods: SVector<T, K>,
+    /// Posterior mode probabilities.
     pub probabilities: SVector<T, K>,
+    /// `ln sum_j c_j N(e_j; 0, S_j)`: the log evidence of the measurement under the mixture.
+    pub log_evidence: T,
+    /// Safeguards that acted in the mixing and fusion (covariance symmetrised).
+    pub flags: Flags,
 }
 
 /// IMM over `K` filters of type `F` with an `NX`-dimensional common state.
@@ -63,7 +69,7 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
         {
             return Err(Error::InvalidParameter("IMM mode probabilities"));
         }
-        let (x, p) = fuse(&filters, &probabilities);
+        let (x, p, _) = fuse(&filters, &probabilities);
         Ok(Self {
             filters,
             probabilities,
@@ -79,7 +85,7 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
         if K <= 1 {
             return SMatrix::repeat(T::one());
         }
-        let off = (T::one() - stay) / cast((K - 1) as f64);
+        let off = (T::one() - stay) / cast(K.saturating_sub(1) as f64);
         SMatrix::from_fn(|i, j| if i == j { stay } else { off })
     }
 
@@ -106,6 +112,7 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
         let mut filters = self.filters.clone();
         let mut log_weights = SVector::<T, K>::zeros();
         let mut log_likelihoods = SVector::<T, K>::zeros();
+        let mut flags = Flags::NONE;
         for (((filter, column), (&c_j, lw)), ll) in filters
             .iter_mut()
             .zip(self.transition.column_iter())
@@ -131,7 +138,9 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
                     let d = src.mode_state() - x0;
                     p0 += (src.mode_covariance() + d * d.transpose()) * (h * mu / c_j);
                 }
-                symmetrise(&mut p0);
+                if symmetrise(&mut p0) {
+                    flags.insert(Flags::COVARIANCE_SYMMETRISED);
+                }
                 filter.reinitialise(&x0, &p0)?;
             }
             // Lines 6-7.
@@ -147,8 +156,18 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
         if !norm.finite() {
             return Err(Error::NonFiniteState);
         }
-        let probabilities = log_weights.map(|lw| (lw - norm).exp());
-        let (x, p) = fuse(&filters, &probabilities);
+        // Divided by their sum: at huge log-likelihoods `norm` loses the `ln K` term to
+        // round-off and the exponentials alone would not sum to one.
+        let unnormalised = log_weights.map(|lw| (lw - norm).exp());
+        let total = unnormalised.sum();
+        if !(total.finite() && total > T::zero()) {
+            return Err(Error::NonFiniteState);
+        }
+        let probabilities = unnormalised / total;
+        let (x, p, symmetrised) = fuse(&filters, &probabilities);
+        if symmetrised {
+            flags.insert(Flags::COVARIANCE_SYMMETRISED);
+        }
         if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
             return Err(Error::NonFiniteState);
         }
@@ -159,6 +178,8 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
         Ok(ImmReport {
             log_likelihoods,
             probabilities,
+            log_evidence: norm,
+            flags,
         })
     }
 }
@@ -167,7 +188,7 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
 fn fuse<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize>(
     filters: &[F; K],
     probabilities: &SVector<T, K>,
-) -> (SVector<T, NX>, SMatrix<T, NX, NX>) {
+) -> (SVector<T, NX>, SMatrix<T, NX, NX>, bool) {
     let mut x = SVector::<T, NX>::zeros();
     for (f, &mu) in filters.iter().zip(probabilities.iter()) {
         x += f.mode_state() * mu;
@@ -177,8 +198,8 @@ fn fuse<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize>(
         let d = f.mode_state() - x;
         p += (f.mode_covariance() + d * d.transpose()) * mu;
     }
-    symmetrise(&mut p);
-    (x, p)
+    let symmetrised = symmetrise(&mut p);
+    (x, p, symmetrised)
 }
 
 #[cfg(test)]

@@ -91,13 +91,26 @@ pub struct PfReport<T> {
 ///
 /// Size: `N * (NX + 3) * size_of::<T>()` bytes plus the config (e.g. 14 states, N = 500, f64:
 /// about 68 KiB). On a microcontroller keep it in a `static`.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct ParticleFilter<T: Real, const NX: usize, const N: usize> {
     particles: [SVector<T, NX>; N],
     log_weights: [T; N],
+    // Work buffers, overwritten before every use: not part of the filter's state.
     scratch: [T; N],
     counts: [u32; N],
     config: PfConfig<T, NX>,
+}
+
+/// Shows the state (particles, weights, configuration), not the work buffers, so that two
+/// filters in the same state print the same.
+impl<T: Real, const NX: usize, const N: usize> core::fmt::Debug for ParticleFilter<T, NX, N> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ParticleFilter")
+            .field("particles", &self.particles)
+            .field("log_weights", &self.log_weights)
+            .field("config", &self.config)
+            .finish_non_exhaustive()
+    }
 }
 
 impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
@@ -285,7 +298,7 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
             if all_finite(next.as_slice()) {
                 *p = next;
                 *ok = T::zero();
-                survivors += 1;
+                survivors = survivors.saturating_add(1);
             } else {
                 *ok = T::min_value().unwrap_or(-T::MAX_FINITE);
             }

@@ -106,7 +106,7 @@ pub fn offspring_counts<T: Real, R: Rng + ?Sized>(
             for (c, &w) in counts.iter_mut().zip(weights) {
                 let copies = libm::floor((clean(w) * nf).as_f64()).max(0.0) as u32;
                 *c = copies;
-                assigned += copies as usize;
+                assigned = assigned.saturating_add(copies as usize);
             }
             let rest = n.saturating_sub(assigned);
             if rest > 0 {
@@ -138,7 +138,7 @@ fn walk_positions<T: Real>(
         while u >= cum && i < last {
             match weights.next() {
                 Some(w) => {
-                    i += 1;
+                    i = i.saturating_add(1);
                     cum += w;
                 }
                 None => break,
@@ -165,11 +165,11 @@ pub fn apply_counts<P: Copy>(particles: &mut [P], counts: &[u32]) {
         };
         for _ in 1..copies {
             while hole < n && counts.get(hole).copied().unwrap_or(1) != 0 {
-                hole += 1;
+                hole = hole.saturating_add(1);
             }
             if let Some(slot) = particles.get_mut(hole) {
                 *slot = source;
-                hole += 1;
+                hole = hole.saturating_add(1);
             } else {
                 return;
             }

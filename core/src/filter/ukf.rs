@@ -50,7 +50,7 @@ pub struct UkfReport<T: Real, const NY: usize> {
 
 /// UKF over an `NX`-dimensional state with `NS = 2 NX + 1` sigma points (checked at compile
 /// time). Size: about `(3 NX + 2 NX^2 + NS (NX + 2)) * size_of::<T>()` bytes.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct Ukf<T: Real, const NX: usize, const NS: usize> {
     x: SVector<T, NX>,
     p: SMatrix<T, NX, NX>,
@@ -63,6 +63,22 @@ pub struct Ukf<T: Real, const NX: usize, const NS: usize> {
     propagated: bool,
     /// NIS gate: measurements with a larger NIS are rejected (`MAX_FINITE` disables it).
     gate: T,
+}
+
+/// Shows the estimate and the settings; the sigma-point cache (and its validity flag) is a
+/// function of `(x, P)` and is left out, so that equal estimates print equally.
+impl<T: Real, const NX: usize, const NS: usize> core::fmt::Debug for Ukf<T, NX, NS> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Ukf")
+            .field("x", &self.x)
+            .field("p", &self.p)
+            .field("q", &self.q)
+            .field("wm", &self.wm)
+            .field("wc", &self.wc)
+            .field("lambda", &self.lambda)
+            .field("gate", &self.gate)
+            .finish_non_exhaustive()
+    }
 }
 
 impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
@@ -170,25 +186,39 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
     }
 
     /// Sigma points of `N(x, P)`: `x`, then `x +- columns of chol((n + lambda) P)`.
-    fn sigma_points(
-        &self,
+    /// Writes the sigma points of `(x, p)` into `out`; on error (`p` not positive definite)
+    /// `out` is left as it was. Filling in place keeps the 2 NX + 1 points off the stack.
+    fn fill_sigma_points(
+        lambda: T,
         x: &SVector<T, NX>,
         p: &SMatrix<T, NX, NX>,
-    ) -> Result<[SVector<T, NX>; NS], Error> {
+        out: &mut [SVector<T, NX>; NS],
+    ) -> Result<(), Error> {
         let n: T = cast(NX as f64);
-        let l = Cholesky::new(*p * (n + self.lambda))
+        let l = Cholesky::new(*p * (n + lambda))
             .ok_or(Error::NotPositiveDefinite)?
             .l();
-        let mut pts = [*x; NS];
+        if let Some(first) = out.first_mut() {
+            *first = *x;
+        }
         for (k, col) in l.column_iter().enumerate() {
-            if let Some(s) = pts.get_mut(k + 1) {
+            if let Some(s) = out.get_mut(k.saturating_add(1)) {
                 *s = x + col;
             }
-            if let Some(s) = pts.get_mut(NX + k + 1) {
+            if let Some(s) = out.get_mut(NX.saturating_add(k).saturating_add(1)) {
                 *s = x - col;
             }
         }
-        Ok(pts)
+        Ok(())
+    }
+
+    /// Puts back an estimate saved before a failed step (crate-internal rollback: the
+    /// values were the filter's own, so they are not checked again). The sigma-point cache is
+    /// invalidated and rebuilt from `(x, p)` when next needed.
+    pub(crate) fn restore_estimate(&mut self, x: SVector<T, NX>, p: SMatrix<T, NX, NX>) {
+        self.x = x;
+        self.p = p;
+        self.propagated = false;
     }
 
     /// Time update through the model over `dt`. Errors (bad input, `dt`, a covariance that
@@ -206,7 +236,8 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
         if !all_finite(u.as_slice()) {
             return Err(Error::NonFiniteInput);
         }
-        let mut pts = self.sigma_points(&self.x, &self.p)?;
+        let mut pts = [self.x; NS];
+        Self::fill_sigma_points(self.lambda, &self.x, &self.p, &mut pts)?;
         for s in pts.iter_mut() {
             *s = model.step(s, u, dt);
             if !all_finite(s.as_slice()) {
@@ -230,10 +261,10 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
         if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
             return Err(Error::NonFiniteState);
         }
-        let prior_sigmas = self.sigma_points(&x, &p)?;
+        // The prior's sigma points go straight into the cache (left as it was on error).
+        Self::fill_sigma_points(self.lambda, &x, &p, &mut self.sigmas)?;
         self.x = x;
         self.p = p;
-        self.sigmas = prior_sigmas;
         self.propagated = true;
         Ok(flags)
     }
@@ -268,11 +299,13 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
             return Err(Error::InvalidParameter("r"));
         }
         let y = SVector::<T, NY>::from_iterator(y.iter().copied());
-        let sigmas = if self.propagated {
-            self.sigmas
-        } else {
-            self.sigma_points(&self.x, &self.p)?
-        };
+        // The cache holds the sigma points of the current (x, P) whenever `propagated`;
+        // refilling it from (x, P) changes no estimate, so it may happen before an error.
+        if !self.propagated {
+            Self::fill_sigma_points(self.lambda, &self.x, &self.p, &mut self.sigmas)?;
+            self.propagated = true;
+        }
+        let sigmas = &self.sigmas;
         let mut hs = [SVector::<T, NY>::zeros(); NS];
         for (h, s) in hs.iter_mut().zip(sigmas.iter()) {
             *h = model.observe(s, u);
@@ -291,9 +324,16 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
             s_cov += dz * dz.transpose() * *w;
             pxz += (s - self.x) * dz.transpose() * *w;
         }
+        // Finite predicted measurements can still overflow in the outer products.
+        if !all_finite(s_cov.as_slice()) || !all_finite(pxz.as_slice()) {
+            return Err(Error::NonFiniteState);
+        }
         let chol = Cholesky::new(s_cov).ok_or(Error::NotPositiveDefinite)?;
         let innovation = y - zp;
         let nis = innovation.dot(&chol.solve(&innovation));
+        // An innovation too large to square (NaN from inf - inf or 0 * inf) is infinitely
+        // implausible: it fails the gate below (flagged as rejected), never reaches the state.
+        let nis = if nis.nan() { T::MAX_FINITE } else { nis };
         let mut report = UkfReport {
             innovation,
             innovation_cov: s_cov,

@@ -10,6 +10,7 @@
 
 use crate::error::Error;
 use crate::real::{Real, cast};
+use crate::safeguard::{Flags, guarded_div, symmetrise};
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
 /// An identified AR model of order `N`.
@@ -206,6 +207,23 @@ impl<T: Real> Default for OrivConfig<T> {
     }
 }
 
+/// What one ORIV update did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct OrivReport<T> {
+    /// One-step prediction error `y - phi^T theta` with the estimate before the update.
+    pub innovation: T,
+    /// Its variance, `sigma^2 (1 + phi^T P phi)`, with `sigma^2` the running mean of the
+    /// normalised squared prediction errors (the first update uses `sigma^2 = 1`).
+    pub innovation_variance: T,
+    /// `innovation^2 / innovation_variance` (about chi-square with 1 dof when the model fits).
+    pub test_ratio: T,
+    /// False while the lag history is still filling (before `tau_0`): nothing was estimated.
+    pub fused: bool,
+    /// Safeguards that acted (`P` symmetrised beyond round-off).
+    pub flags: Flags,
+}
+
 /// Overdetermined recursive instrumental variable estimator (Algorithm 1) for AR(`N`) with
 /// `Q` extra instruments. The instrument vector `[-y(t-1-d) .. -y(t-N-Q-d)]` is stored in two
 /// blocks (`N` and `Q` rows) so that both sizes stay plain const generics.
@@ -225,6 +243,8 @@ pub struct Oriv<T: Real, const N: usize, const Q: usize> {
     seen: usize,
     delay: usize,
     updates: usize,
+    // Sum of `e^2 / (1 + phi^T P phi)` over the updates (noise level for the test ratio).
+    normalised_error_sum: T,
 }
 
 impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
@@ -236,7 +256,7 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
         if !(config.psi.finite() && config.psi > T::zero()) {
             return Err(Error::InvalidParameter("psi"));
         }
-        if config.instrument_delay > N + Q {
+        if config.instrument_delay > N.saturating_add(Q) {
             return Err(Error::InvalidParameter("instrument_delay"));
         }
         Ok(Self {
@@ -253,6 +273,7 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
             seen: 0,
             delay: config.instrument_delay,
             updates: 0,
+            normalised_error_sum: T::zero(),
         })
     }
 
@@ -272,13 +293,22 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
         if k == 0 {
             T::zero()
         } else if k <= N {
-            pick(self.lag_a.get(k - 1))
-        } else if k <= N + Q {
-            pick(self.lag_b.get(k - N - 1))
-        } else if k <= 2 * N + Q {
-            pick(self.lag_c.get(k - N - Q - 1))
+            pick(self.lag_a.get(k.saturating_sub(1)))
+        } else if k <= N.saturating_add(Q) {
+            pick(self.lag_b.get(k.saturating_sub(N).saturating_sub(1)))
+        } else if k <= N.saturating_mul(2).saturating_add(Q) {
+            pick(
+                self.lag_c
+                    .get(k.saturating_sub(N).saturating_sub(Q).saturating_sub(1)),
+            )
         } else {
-            pick(self.lag_d.get(k - 2 * N - Q - 1))
+            pick(
+                self.lag_d.get(
+                    k.saturating_sub(N.saturating_mul(2))
+                        .saturating_sub(Q)
+                        .saturating_sub(1),
+                ),
+            )
         }
     }
 
@@ -297,17 +327,24 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
     /// One ORIV step (Algorithm 1, steps 1-9) with the new sample `y(t)`. Before `tau_0` it
     /// only fills the lag history. A non-finite sample, a singular 2x2 gain system or a
     /// non-finite result returns `Err` and leaves the estimator unchanged.
-    pub fn update(&mut self, y: T) -> Result<(), Error> {
+    pub fn update(&mut self, y: T) -> Result<OrivReport<T>, Error> {
         if !y.finite() {
             return Err(Error::NonFiniteMeasurement);
         }
-        if self.seen < N + Q + self.delay {
+        if self.seen < N.saturating_add(Q).saturating_add(self.delay) {
             self.push_lag(y);
-            return Ok(());
+            return Ok(OrivReport::default());
         }
-        let phi: SVector<T, N> = SVector::from_fn(|i, _| -self.lag(i + 1));
-        let z_head: SVector<T, N> = SVector::from_fn(|i, _| -self.lag(i + 1 + self.delay));
-        let z_tail: SVector<T, Q> = SVector::from_fn(|i, _| -self.lag(i + 1 + N + self.delay));
+        let phi: SVector<T, N> = SVector::from_fn(|i, _| -self.lag(i.saturating_add(1)));
+        let z_head: SVector<T, N> =
+            SVector::from_fn(|i, _| -self.lag(i.saturating_add(1).saturating_add(self.delay)));
+        let z_tail: SVector<T, Q> = SVector::from_fn(|i, _| {
+            -self.lag(
+                i.saturating_add(1)
+                    .saturating_add(N)
+                    .saturating_add(self.delay),
+            )
+        });
         // 1-4
         let eta = self.r_head.tr_mul(&z_head) + self.r_tail.tr_mul(&z_tail);
         let big_phi = SMatrix::<T, N, 2>::from_columns(&[eta, phi]);
@@ -321,11 +358,33 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
         let gain = p_phi * s_inv;
         // 6-9
         let theta = self.theta + gain * (v - big_phi.tr_mul(&self.theta));
-        let p = self.p - gain * p_phi.transpose();
-        let p = (p + p.transpose()) * cast::<T>(0.5);
+        let mut p = self.p - gain * p_phi.transpose();
+        let mut flags = Flags::NONE;
+        if symmetrise(&mut p) {
+            flags.insert(Flags::COVARIANCE_SYMMETRISED);
+        }
         if !theta.iter().chain(p.iter()).all(|x| x.finite()) {
             return Err(Error::NonFiniteState);
         }
+        let innovation = y - phi.dot(&self.theta);
+        let spread = T::one() + phi.dot(&(self.p * phi));
+        let sigma2 = if self.updates == 0 {
+            T::one()
+        } else {
+            self.normalised_error_sum / cast::<T>(self.updates as f64)
+        };
+        let innovation_variance = sigma2 * spread;
+        let test_ratio = guarded_div(
+            innovation * innovation,
+            innovation_variance,
+            T::MIN_POSITIVE,
+        );
+        let normalised_error_sum = self.normalised_error_sum
+            + guarded_div(innovation * innovation, spread, T::MIN_POSITIVE);
+        if !(normalised_error_sum.finite() && test_ratio.finite()) {
+            return Err(Error::NonFiniteState);
+        }
+        self.normalised_error_sum = normalised_error_sum;
         self.theta = theta;
         self.p = p;
         self.r_head += z_head * phi.transpose();
@@ -334,7 +393,13 @@ impl<T: Real, const N: usize, const Q: usize> Oriv<T, N, Q> {
         self.rho_tail += z_tail * y;
         self.updates = self.updates.saturating_add(1);
         self.push_lag(y);
-        Ok(())
+        Ok(OrivReport {
+            innovation,
+            innovation_variance,
+            test_ratio,
+            fused: true,
+            flags,
+        })
     }
 }
 
@@ -354,12 +419,15 @@ fn shift_in<T: Real, const M: usize>(block: &SVector<T, M>, x: T) -> (SVector<T,
     if M == 0 {
         return (*block, x);
     }
-    let out = block.get(M - 1).copied().unwrap_or(x);
+    let out = block.get(M.saturating_sub(1)).copied().unwrap_or(x);
     let shifted = SVector::from_fn(|i, _| {
         if i == 0 {
             x
         } else {
-            block.get(i - 1).copied().unwrap_or_else(T::zero)
+            block
+                .get(i.saturating_sub(1))
+                .copied()
+                .unwrap_or_else(T::zero)
         }
     });
     (shifted, out)
@@ -398,7 +466,7 @@ pub fn check_window<T: Real, I: Iterator<Item = T> + Clone>(
         if !y.finite() {
             return Err(Error::NonFiniteMeasurement);
         }
-        count += 1;
+        count = count.saturating_add(1);
         sum += y;
         lo = lo.min(y);
         hi = hi.max(y);
@@ -459,10 +527,10 @@ fn residual_model<T: Real, const N: usize, I: Iterator<Item = T>>(
         if seen >= N {
             let e = y + lags.dot(&theta);
             sum += e * e;
-            count += 1;
+            count = count.saturating_add(1);
         }
         lags = shift_in(&lags, y).0;
-        seen += 1;
+        seen = seen.saturating_add(1);
     }
     if count == 0 {
         return Err(Error::InsufficientData);

@@ -133,7 +133,7 @@ impl<T: Real, const D: usize, const M: usize> GaussianProcess<T, D, M> {
         }
         let mut l = SMatrix::<T, M, M>::zeros();
         for (i, row) in chol_lower.iter().enumerate() {
-            for (j, &r) in row.iter().enumerate().take(i + 1) {
+            for (j, &r) in row.iter().enumerate().take(i.saturating_add(1)) {
                 if let Some(v) = l.get_mut((i, j)) {
                     *v = cast(r);
                 }
@@ -370,6 +370,10 @@ pub struct GpUkfReport<T: Real, const NX: usize> {
     pub innovation_cov: SMatrix<T, NX, NX>,
     /// `ln N(innovation; 0, S)`, the mode likelihood of the IMM (Table 3, line 7).
     pub log_likelihood: T,
+    /// Normalised innovation squared `e^T S^-1 e` (the test ratio, chi-square with NX dof).
+    pub nis: T,
+    /// Whether the measurement was fused (false when the UKF's gate rejected it).
+    pub fused: bool,
     /// The GP was queried outside its training range at the prior mean.
     pub extrapolating: bool,
     pub flags: Flags,
@@ -458,6 +462,8 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
             innovation: report.innovation,
             innovation_cov: report.innovation_cov,
             log_likelihood,
+            nis: report.nis,
+            fused: report.fused,
             extrapolating,
             flags,
         })

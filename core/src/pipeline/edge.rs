@@ -123,27 +123,27 @@ impl<T: Real, const N: usize, const Q: usize, const S: usize, const L: usize>
         check_window(snapshot.iter().copied(), &self.config.check)?;
         let full = self.filled >= S;
         let (start, kept) = if full {
-            (self.head + 1, S - 1)
+            (self.head.saturating_add(1), S.saturating_sub(1))
         } else {
             (0, self.filled)
         };
         let slot = if full { self.head } else { self.filled };
-        if !full && self.filled + 1 < S {
+        if !full && self.filled.saturating_add(1) < S {
             self.store(slot, snapshot);
-            self.filled += 1;
+            self.filled = self.filled.saturating_add(1);
             return Ok(None);
         }
         let buffer = &self.buffer;
         let window = (0..kept)
-            .filter_map(move |k| buffer.get((start + k) % S))
+            .filter_map(move |k| buffer.get(start.saturating_add(k).checked_rem(S)?))
             .flat_map(|s| s.iter().copied())
             .chain(snapshot.iter().copied());
         let model = identify::<T, N, Q, _>(window, &self.config.oriv, &self.config.check)?;
         self.store(slot, snapshot);
         if full {
-            self.head = (self.head + 1) % S;
+            self.head = self.head.saturating_add(1).checked_rem(S).unwrap_or(0);
         } else {
-            self.filled += 1;
+            self.filled = self.filled.saturating_add(1);
             self.head = 0;
         }
         Ok(Some(self.accept(model)))
@@ -161,7 +161,7 @@ impl<T: Real, const N: usize, const Q: usize, const S: usize, const L: usize>
         let transmit = self.models_made > self.config.warmup_models;
         if transmit && self.reference.is_none() {
             self.reference_sum += model.theta;
-            self.reference_count += 1;
+            self.reference_count = self.reference_count.saturating_add(1);
             if self.reference_count >= self.config.reference_models {
                 self.reference = Some(self.reference_sum / cast::<T>(self.reference_count as f64));
             }

@@ -4,9 +4,8 @@
 //! [`Scooter::step`] call at 50 Hz.
 //!
 //! Size: 4096 bytes in f32 (8128 in f64), dominated by the UKF (9 states, 19 sigma points)
-//! and the 25-sample matching window; a step also holds two copies of the filter on the stack
-//! (so that an error leaves the pipeline unchanged): keep the pipeline in a `static` and give
-//! the stack about 12 kB.
+//! and the 25-sample matching window. A step keeps one copy of the UKF on the stack (so that an
+//! error leaves the pipeline unchanged); keep the pipeline in a `static`.
 
 use crate::diagnose::scooter::{ArrReport, FaultSet, ScooterArr, suspected_faults};
 use crate::error::Error;
@@ -222,15 +221,17 @@ impl<T: Real> Scooter<T> {
             0
         };
         let run_start = if run == 1 { t } else { self.run_start };
-        let mut filter = self.filter.clone();
+        // The filter steps in place (no copy of it on the stack: it is most of the pipeline's
+        // size); `AdaptiveUkf::step` leaves it unchanged on error, and the covariance reset of
+        // an activation is undone here if the step then fails.
         let mut flags = Flags::NONE;
         let mut active = self.active;
         let mut activated_now = false;
+        let mut covariance_before_activation = None;
         if !active && run >= self.config.activation_samples {
-            active = true;
-            activated_now = true;
             // Fault estimation starts: the fault parameters get their initial uncertainty.
-            let mut p = *filter.ukf().covariance();
+            let before = *self.filter.ukf().covariance();
+            let mut p = before;
             for i in BETA_THETA_R..NX {
                 for j in 0..NX {
                     if let Some(v) = p.get_mut((i, j)) {
@@ -244,23 +245,39 @@ impl<T: Real> Scooter<T> {
                     *v = *p0;
                 }
             }
-            filter.ukf_mut().set_covariance(p)?;
+            self.filter.ukf_mut().set_covariance(p)?;
+            covariance_before_activation = Some(before);
+            active = true;
+            activated_now = true;
         }
         let fire = arr_report.psi >= self.config.psi_threshold;
         let rising = fire && !self.psi_above;
-        let beta_before = filter
+        let beta_before = self
+            .filter
             .ukf()
             .state()
             .get(BETA_THETA_R)
             .copied()
             .unwrap_or(T::one());
-        let var_before = beta_variance(&filter);
-        let adaptive = filter.step(&self.model, &Vector1::new(u), &y3, dt, fire && active)?;
+        let var_before = beta_variance(&self.filter);
+        let adaptive =
+            match self
+                .filter
+                .step(&self.model, &Vector1::new(u), &y3, dt, fire && active)
+            {
+                Ok(r) => r,
+                Err(e) => {
+                    if let Some(before) = covariance_before_activation {
+                        // It was accepted before the reset, so it is accepted again.
+                        let _ = self.filter.ukf_mut().set_covariance(before);
+                    }
+                    return Err(e);
+                }
+            };
         flags.insert(adaptive.flags);
 
         // Commit.
         self.arr = arr;
-        self.filter = filter;
         self.inconsistent_run = run;
         self.run_start = run_start;
         self.active = active;

@@ -1,5 +1,6 @@
 //! Estimation models of the plants the papers study.
 
+pub mod lubricant_kalman;
 pub mod reaction_wheel;
 pub mod scooter;
 pub mod valve;

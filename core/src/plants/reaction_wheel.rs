@@ -171,7 +171,7 @@ impl<T: Real> WheelParams<T> {
             * self.noise_angle
             * self.noise_frequency
             * self.noise_frequency
-            * (self.noise_frequency * t + phase).sin()
+            * (self.noise_frequency * t + phase).fast_sin()
     }
 
     /// Smooth `sign(omega)` for Coulomb friction (tanh with a small speed scale), so that
@@ -186,7 +186,7 @@ impl<T: Real> WheelParams<T> {
         } else if x < -limit {
             -self.coulomb_friction
         } else {
-            self.coulomb_friction * x.tanh()
+            self.coulomb_friction * x.fast_tanh()
         }
     }
 
@@ -356,7 +356,7 @@ impl<T: Real> Stochastic<T, 3, 2> for WheelTemperatureModel<T> {
 /// smaller loss as Table 4's fault scenarios require.
 #[inline]
 pub fn lubricant_loss_rate<T: Real>(b: T, beta: T, temperature_c: T) -> T {
-    beta * (-b / temperature_c).exp()
+    beta * (-b / temperature_c).fast_exp()
 }
 
 /// Per-interval summary of the lubricant temperature for Eqs. 29-34: the sum of
@@ -395,7 +395,7 @@ impl<T: Real> IntervalExposure<T> {
     pub fn integral(&self, b: T) -> T {
         let half: T = cast(0.5);
         self.duration
-            * (-b * self.mean_inverse_temperature).exp()
+            * (-b * self.mean_inverse_temperature).fast_exp()
             * (T::one() + half * b * b * self.var_inverse_temperature)
     }
 

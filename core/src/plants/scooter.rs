@@ -116,7 +116,7 @@ impl<T: Real> ScooterParams<T> {
     }
     /// Smooth sign used for Coulomb friction (continuous, so RK4 and sigma points behave).
     pub fn sign(&self, w: T) -> T {
-        (w / self.sign_scale).tanh()
+        (w / self.sign_scale).fast_tanh()
     }
 
     /// Time derivative of the dynamic state with rear viscous friction `r_rv` and rear shaft

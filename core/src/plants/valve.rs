@@ -79,7 +79,7 @@ impl DamageMode {
     }
     /// Index of the wear parameter in the state vector.
     pub const fn wear_index(self) -> usize {
-        self.damage_index() + 5
+        self.damage_index().saturating_add(5)
     }
     /// Short name for reports.
     pub const fn name(self) -> &'static str {
@@ -1320,7 +1320,7 @@ impl<T: Real> DamageRateTable<T> {
     /// Driving quantity per cycle of `mode` at damage `d` (linear interpolation, held
     /// constant beyond the grid).
     pub fn work_at(&self, mode: DamageMode, d: T) -> T {
-        let i = mode.damage_index() - idx::R;
+        let i = mode.damage_index().saturating_sub(idx::R);
         let (Some(grid), Some(works)) = (self.damage.get(i), self.work.get(i)) else {
             return T::zero();
         };

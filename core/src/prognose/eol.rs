@@ -89,12 +89,12 @@ where
                     *v += *s * standard_normal::<T, R>(rng);
                 }
             }
-            k += 1;
+            k = k.saturating_add(1);
             // A diverged trajectory is treated as having failed (conservative).
             done = !all_finite(x.as_slice()) || eol.reached(&x);
         }
         *time = if done {
-            reached += 1;
+            reached = reached.saturating_add(1);
             cast::<T>(f64::from(k)) * settings.dt
         } else {
             T::MAX_FINITE

@@ -223,7 +223,7 @@ impl<T: Real> SequentialPrognoser<T> {
         };
         let t_next = self
             .usage_changes
-            .get(self.handled_changes + 1)
+            .get(self.handled_changes.saturating_add(1))
             .copied()
             .unwrap_or(T::MAX_FINITE);
         let mut after = self
@@ -233,7 +233,7 @@ impl<T: Real> SequentialPrognoser<T> {
         let (Some(&first), Some(&second)) = (after.next(), after.next()) else {
             return Outcome::Recorded;
         };
-        self.handled_changes += 1;
+        self.handled_changes = self.handled_changes.saturating_add(1);
         let Some(&(_, f_d1, _)) = self.disappearances.first() else {
             return Outcome::Recorded;
         };
@@ -260,7 +260,7 @@ impl<T: Real> SequentialPrognoser<T> {
             return Outcome::NotReactivated(events);
         };
         let eol = end_of_life(first.1, first.0, lambda, self.f_end).unwrap_or(T::MAX_FINITE);
-        let usage = u8::try_from(self.handled_changes + 1).unwrap_or(u8::MAX);
+        let usage = u8::try_from(self.handled_changes.saturating_add(1)).unwrap_or(u8::MAX);
         let segment = Segment {
             usage,
             t_ref: first.0,
@@ -304,7 +304,7 @@ impl<T: Real> SequentialPrognoser<T> {
                 Some(e) => {
                     let rul = e - seg.t_id;
                     sum += rul;
-                    count += 1;
+                    count = count.saturating_add(1);
                     rul
                 }
                 None => T::MAX_FINITE,
