@@ -43,9 +43,9 @@ fn write(dir: &Path, d: &Dataset) -> PathBuf {
 }
 
 #[test]
-fn gap_finds_viscous_temperature_in_wheel_data_and_writes_the_report() {
+fn gap_finds_lubricant_torque_noise_in_wheel_data_and_writes_the_report() {
     let dir = scratch("wheel");
-    let d = one("reaction_wheel", "viscous_temperature", 4.0);
+    let d = one("reaction_wheel", "lubricant_torque_noise", 4.0);
     assert_eq!(d.label.channel.as_deref(), Some("y:speed"));
     let csv = write(&dir, &d);
     let out = dir.join("out");
@@ -54,24 +54,25 @@ fn gap_finds_viscous_temperature_in_wheel_data_and_writes_the_report() {
     let verdict: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
     assert_eq!(verdict["plant"], "reaction_wheel");
-    assert_eq!(verdict["verdict"], "viscous_temperature");
+    assert_eq!(verdict["verdict"], "lubricant_torque_noise");
     assert_eq!(verdict["where"]["channel"], "y:speed");
     assert_eq!(verdict["where"]["significant"], true);
     let top = &verdict["ranking"][0];
-    assert_eq!(top["effect"], "viscous_temperature");
+    assert_eq!(top["effect"], "lubricant_torque_noise");
     let shrink = top["shrink"].as_f64().unwrap();
     assert!(shrink > 0.8, "held-out shrink {shrink}");
-    // The fitted slope is physical: far below the viscous coefficient (3.84e-5) per degC.
-    let fitted = top["params"][0][1].as_f64().unwrap();
-    assert!(fitted > 1e-10 && fitted < 1e-6, "{fitted}");
+    // Amplitude and phase fitted; the phase inside its range.
+    assert_eq!(top["params"].as_array().unwrap().len(), 2);
+    let phase = top["params"][1][1].as_f64().unwrap();
+    assert!((0.0..=std::f64::consts::TAU).contains(&phase), "{phase}");
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(
         html.matches("<svg").count() >= 4,
         "heat map, spectrum, ranking, overlay"
     );
-    assert!(html.contains("viscous_temperature"));
+    assert!(html.contains("lubricant_torque_noise"));
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
-    assert!(md.contains("| 1 | viscous_temperature |"), "{md}");
+    assert!(md.contains("| 1 | lubricant_torque_noise |"), "{md}");
 }
 
 #[test]
