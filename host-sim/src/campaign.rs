@@ -509,6 +509,7 @@ mod tests {
             rejected_steps: 0,
             first_rejection: None,
             seed: 1,
+            injected: Default::default(),
         };
         let m = RunMetrics::from_record(0, &record, 0.05);
         assert!((m.state_rmse["d"] - 0.5).abs() < 1e-12);

@@ -107,6 +107,33 @@ pub enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Long-run stability: run each on-board pipeline in f32 for many steps against a truth
+    /// plant, checking every step for errors, NaN/infinity and covariance blow-up; prints
+    /// steps per second. Exit status 1 if any pipeline fails.
+    Soak {
+        /// Steps per pipeline.
+        #[arg(long, default_value_t = 10_000_000)]
+        steps: u64,
+        /// Only this pipeline (reaction_wheel, scooter, edge).
+        #[arg(long)]
+        system: Option<String>,
+        /// Seed of the truth plants' and the filters' random streams.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Fault injection: RUL error with 5 % dropouts and 1 % outliers against clean runs of
+    /// the same seeds, for each system wired to the injector (markdown table).
+    Faults {
+        /// Runs (seeds) per case.
+        #[arg(long, default_value_t = 20)]
+        runs: usize,
+        /// Base seed.
+        #[arg(long, default_value_t = 20261201)]
+        seed: u64,
+        /// Also write the table to this file (atomically).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Sim-to-real gap diagnosis of recorded data against the model named in its meta file:
     /// where the model disagrees, which unmodelled effect explains it, how far it shrinks.
     /// Writes verdict.json, report.md and report.html.
@@ -161,6 +188,16 @@ pub enum Command {
         /// Configuration TOML (thresholds, output folder); defaults are the tuned values.
         #[arg(long)]
         config: Option<PathBuf>,
+    },
+    /// Summarise criterion results of `cargo bench -p prognos-tests --bench filters`: table,
+    /// PF scaling slope, filter overhead ratio, log-log plots.
+    BenchReport {
+        /// Criterion output folder [default: $CARGO_TARGET_DIR/criterion or target/criterion].
+        #[arg(long)]
+        criterion: Option<PathBuf>,
+        /// Folder for summary.txt and the SVG plots.
+        #[arg(long, default_value = "docs/bench")]
+        out: PathBuf,
     },
 }
 
@@ -346,6 +383,58 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 crate::output::write_text(&path, &text)?;
             }
             Ok(())
+        }
+        Command::BenchReport { criterion, out } => {
+            let criterion = criterion.unwrap_or_else(|| {
+                std::env::var_os("CARGO_TARGET_DIR")
+                    .map_or_else(|| PathBuf::from("target"), PathBuf::from)
+                    .join("criterion")
+            });
+            let (text, files) = crate::bench_report::run(&criterion, &out)?;
+            print!("{text}");
+            for f in files {
+                println!("wrote {}", f.display());
+            }
+            Ok(())
+        }
+        Command::Faults { runs, seed, out } => {
+            let text = crate::faults::table(runs, seed);
+            print!("{text}");
+            if let Some(path) = out {
+                crate::output::write_text(&path, &text)?;
+            }
+            Ok(())
+        }
+        Command::Soak {
+            steps,
+            system,
+            seed,
+        } => {
+            let systems: Vec<&str> = match system.as_deref() {
+                Some(name) if crate::soak::SYSTEMS.contains(&name) => vec![name],
+                Some(name) => {
+                    return Err(SimError::Run(format!(
+                        "unknown soak system `{name}` (known: {})",
+                        crate::soak::SYSTEMS.join(", ")
+                    )));
+                }
+                None => crate::soak::SYSTEMS.to_vec(),
+            };
+            let mut failed = Vec::new();
+            for name in systems {
+                let Some(report) = crate::soak::soak(name, steps, seed) else {
+                    continue;
+                };
+                println!("{}", report.line());
+                if !report.passed() {
+                    failed.push(name);
+                }
+            }
+            if failed.is_empty() {
+                Ok(())
+            } else {
+                Err(SimError::Run(format!("soak failed: {}", failed.join(", "))))
+            }
         }
         Command::Gap { data, out, meta } => {
             let started = Instant::now();

@@ -9,11 +9,13 @@
 #![forbid(unsafe_code)]
 
 pub mod bearing;
+pub mod bench_report;
 pub mod campaign;
 pub mod cli;
 pub mod dataio;
 pub mod edge_cloud;
 pub mod error;
+pub mod faults;
 pub mod gap;
 pub mod linear_degradation;
 pub mod lockstep;
@@ -25,6 +27,7 @@ pub mod registry;
 pub mod reproduce;
 pub mod scenario;
 pub mod scooter;
+pub mod soak;
 pub mod valve;
 
 pub use error::SimError;

@@ -94,6 +94,10 @@ pub struct FilterSettings {
     /// Particle filter only: roughening constant of the rate (Gordon et al.), which keeps
     /// the static rate from collapsing onto a few particles.
     pub roughening: f64,
+    /// Kalman only: gate on the normalised innovation squared (e.g. 10.83, the 99.9 %
+    /// point of chi-square with 1 dof). A measurement beyond it is rejected as an outlier
+    /// (`Err`, state unchanged, logged as rejected); absent = no gate.
+    pub gate: Option<f64>,
 }
 
 impl Default for FilterSettings {
@@ -113,6 +117,7 @@ impl Default for FilterSettings {
             future_load: None,
             prediction_dt: 5.0,
             roughening: 0.1,
+            gate: None,
         }
     }
 }
@@ -283,8 +288,15 @@ impl Estimator for LinearKalman {
         if innovation_var.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return Err(Error::NotPositiveDefinite);
         }
-        let k = [c[0][0] / innovation_var, c[1][0] / innovation_var];
         let innovation = z - m[0];
+        if let Some(gate) = s.gate
+            && innovation * innovation / innovation_var > gate
+        {
+            return Err(Error::OutOfRange(
+                "measurement (outside the innovation gate)",
+            ));
+        }
+        let k = [c[0][0] / innovation_var, c[1][0] / innovation_var];
         m = [m[0] + k[0] * innovation, m[1] + k[1] * innovation];
         c = [
             [(1.0 - k[0]) * c[0][0], (1.0 - k[0]) * c[0][1]],

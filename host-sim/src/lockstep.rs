@@ -15,7 +15,7 @@
 
 use crate::dataio::{Recording, TimeSeries};
 use crate::error::SimError;
-use crate::scenario::{InputProfile, Scenario};
+use crate::scenario::{InputProfile, Scenario, SensorFaults};
 use rand_core::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
@@ -32,6 +32,8 @@ pub mod stream {
     pub const SENSOR: u64 = 2;
     /// The estimator's own sampling (particle filter, prediction).
     pub const ESTIMATOR: u64 = 3;
+    /// Injected sensor faults (`[sensor_faults]`), apart from the sensor noise.
+    pub const FAULTS: u64 = 4;
 }
 
 /// SplitMix64 mix of a seed and an index: well-separated seeds for runs and streams.
@@ -138,6 +140,8 @@ pub struct RunSettings {
     pub stop_at_eol: bool,
     /// The run seed; the plant and sensor streams derive from it.
     pub seed: u64,
+    /// Faults injected between the sensor and the estimator.
+    pub faults: SensorFaults,
 }
 
 impl RunSettings {
@@ -148,6 +152,7 @@ impl RunSettings {
             samples: scenario.samples(),
             stop_at_eol: scenario.stop_at_eol,
             seed: scenario.run_seed(run),
+            faults: scenario.sensor_faults,
         }
     }
 }
@@ -165,12 +170,15 @@ pub struct RunRecord {
     pub first_rejection: Option<String>,
     /// The run seed.
     pub seed: u64,
+    /// Samples touched by each injected sensor fault (`[sensor_faults]`).
+    pub injected: InjectedFaults,
 }
 
 /// Runs one simulation in lockstep.
 pub fn run_lockstep(sim: &mut Simulation, settings: &RunSettings) -> Result<RunRecord, SimError> {
     let mut plant_rng = stream_rng(settings.seed, stream::PLANT);
     let mut sensor_rng = stream_rng(settings.seed, stream::SENSOR);
+    let mut injector = FaultInjector::new(settings.faults, settings.seed);
     let input_names = sim.inputs.input_names();
     let channel_names = sim.sensor.channel_names();
     let state_names = sim.plant.state_names();
@@ -182,6 +190,7 @@ pub fn run_lockstep(sim: &mut Simulation, settings: &RunSettings) -> Result<RunR
     );
     let mut true_eol = None;
     for k in 0..=settings.samples {
+        // The log keeps the nominal time; the estimator sees the (jittered) sample time.
         let t = k as f64 * settings.dt;
         let u = sim.inputs.inputs(t);
         check_len("input source", &u, input_names.len())?;
@@ -191,9 +200,10 @@ pub fn run_lockstep(sim: &mut Simulation, settings: &RunSettings) -> Result<RunR
         }
         let x = sim.plant.state();
         check_len("truth plant", &x, state_names.len())?;
-        let y = sim.sensor.measure(t, &u, &x, &mut sensor_rng);
+        let mut y = sim.sensor.measure(t, &u, &x, &mut sensor_rng);
         check_len("sensor", &y, channel_names.len())?;
-        let result = sim.estimator.step(t, &u, &y);
+        let t_seen = injector.apply(t, settings.dt, &mut y);
+        let result = sim.estimator.step(t_seen, &u, &y);
         log.push(t, &u, &y, &x, result)?;
         if true_eol.is_none() && sim.plant.end_of_life() {
             true_eol = Some(t);
@@ -202,7 +212,112 @@ pub fn run_lockstep(sim: &mut Simulation, settings: &RunSettings) -> Result<RunR
             }
         }
     }
-    Ok(log.finish(true_eol, settings.seed))
+    let mut record = log.finish(true_eol, settings.seed);
+    record.injected = injector.counts;
+    Ok(record)
+}
+
+/// How many samples each injected fault touched in a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InjectedFaults {
+    pub dropouts: usize,
+    pub outliers: usize,
+    pub stuck: usize,
+    pub nan_burst: usize,
+    pub biased: usize,
+    pub jittered: usize,
+}
+
+impl InjectedFaults {
+    /// Samples with any fault.
+    pub fn total(&self) -> usize {
+        self.dropouts + self.outliers + self.stuck + self.nan_burst + self.biased + self.jittered
+    }
+}
+
+/// Applies [`SensorFaults`] to each sample, on its own random stream ([`stream::FAULTS`]).
+/// Every variate is drawn every sample, so the fault pattern of one kind does not depend on
+/// whether another kind is configured.
+#[derive(Clone, Debug)]
+pub struct FaultInjector {
+    faults: SensorFaults,
+    rng: SimRng,
+    stuck_left: usize,
+    burst_left: usize,
+    last_good: Vec<f64>,
+    pub counts: InjectedFaults,
+}
+
+impl FaultInjector {
+    pub fn new(faults: SensorFaults, run_seed: u64) -> Self {
+        FaultInjector {
+            faults,
+            rng: stream_rng(run_seed, stream::FAULTS),
+            stuck_left: 0,
+            burst_left: 0,
+            last_good: Vec::new(),
+            counts: InjectedFaults::default(),
+        }
+    }
+
+    /// Applies the faults to the measurement `y` taken at `t` and returns the sample time the
+    /// estimator is told.
+    pub fn apply(&mut self, t: f64, dt: f64, y: &mut [f64]) -> f64 {
+        let f = self.faults;
+        let draws = [
+            uniform(&mut self.rng),
+            uniform(&mut self.rng),
+            uniform(&mut self.rng),
+            uniform(&mut self.rng),
+        ];
+        let spike = standard_normal(&mut self.rng);
+        let jitter = standard_normal(&mut self.rng);
+        if f.is_off() {
+            return t;
+        }
+        if self.stuck_left == 0 && draws[2] < f.stuck_probability && f.stuck_samples > 0 {
+            self.stuck_left = f.stuck_samples;
+        }
+        if self.burst_left == 0 && draws[3] < f.nan_burst_probability && f.nan_burst_samples > 0 {
+            self.burst_left = f.nan_burst_samples;
+        }
+        if let Some(t0) = f.bias_jump_time
+            && t >= t0
+            && f.bias_jump != 0.0
+        {
+            y.iter_mut().for_each(|v| *v += f.bias_jump);
+            self.counts.biased += 1;
+        }
+        if self.stuck_left > 0 && self.last_good.len() == y.len() {
+            self.stuck_left -= 1;
+            y.copy_from_slice(&self.last_good);
+            self.counts.stuck += 1;
+        } else {
+            self.stuck_left = self.stuck_left.saturating_sub(1);
+            if draws[1] < f.outlier_probability {
+                y.iter_mut().for_each(|v| *v += f.outlier_std * spike);
+                self.counts.outliers += 1;
+            }
+            if y.iter().all(|v| v.is_finite()) {
+                self.last_good = y.to_vec();
+            }
+        }
+        if self.burst_left > 0 {
+            self.burst_left -= 1;
+            y.iter_mut().for_each(|v| *v = f64::NAN);
+            self.counts.nan_burst += 1;
+        } else if draws[0] < f.dropout_probability {
+            y.iter_mut().for_each(|v| *v = f64::NAN);
+            self.counts.dropouts += 1;
+        }
+        if f.jitter_std > 0.0 {
+            self.counts.jittered += 1;
+            let limit = 0.4 * dt;
+            t + (f.jitter_std * jitter).clamp(-limit, limit)
+        } else {
+            t
+        }
+    }
 }
 
 /// Runs an estimator over recorded data (no truth plant). The recording's `u:` and `y:`
@@ -362,6 +477,7 @@ impl Logger {
             rejected_steps: self.rejected,
             first_rejection: self.first_rejection,
             seed,
+            injected: InjectedFaults::default(),
         }
     }
 }

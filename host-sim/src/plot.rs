@@ -337,6 +337,111 @@ pub fn plot_histogram(
     })
 }
 
+/// One series of a log-log plot: name, points `(x, y)` (positive), and an optional fitted
+/// power law `(slope, intercept)` of `log10 y = intercept + slope log10 x`, drawn dashed.
+pub struct LogLogSeries {
+    pub name: String,
+    pub points: Vec<(f64, f64)>,
+    pub fit: Option<(f64, f64)>,
+}
+
+/// Log-log plot of several series (markers joined by lines, fits dashed), with a legend.
+pub fn plot_loglog(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[LogLogSeries],
+) -> Result<(), SimError> {
+    const COLORS: [RGBColor; 4] = [
+        ESTIMATE,
+        RGBColor(214, 39, 40),
+        CONE,
+        RGBColor(148, 103, 189),
+    ];
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    let all: Vec<(f64, f64)> = series
+        .iter()
+        .flat_map(|s| s.points.iter().copied())
+        .filter(|&(x, y)| positive(x) && positive(y))
+        .collect();
+    let bounds = |pick: fn(&(f64, f64)) -> f64| {
+        let (lo, hi) = all
+            .iter()
+            .map(pick)
+            .fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(v), h.max(v)));
+        if lo.is_finite() && hi > lo {
+            lo / 1.5..hi * 1.5
+        } else {
+            1.0..10.0
+        }
+    };
+    let (xr, yr) = (bounds(|p| p.0), bounds(|p| p.1));
+    render(path, (800, 520), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, (FONT, 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(xr.clone().log_scale(), yr.clone().log_scale())
+            .map_err(err)?;
+        let label = |v: &f64| {
+            if *v >= 1.0 {
+                format!("{v:.0}")
+            } else {
+                format!("{v}")
+            }
+        };
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .x_label_formatter(&label)
+            .y_label_formatter(&label)
+            .draw()
+            .map_err(err)?;
+        for (s, color) in series.iter().zip(COLORS.iter().cycle()) {
+            let pts: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .copied()
+                .filter(|&(x, y)| positive(x) && positive(y))
+                .collect();
+            let color = *color;
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color))
+                .map_err(err)?
+                .label(s.name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                .map_err(err)?;
+            if let Some((slope, intercept)) = s.fit {
+                let (x0, x1) = pts.iter().fold((f64::INFINITY, 0.0f64), |(l, h), p| {
+                    (l.min(p.0), h.max(p.0))
+                });
+                let line = |x: f64| (x, 10f64.powf(intercept + slope * x.log10()));
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        [line(x0), line(x1)],
+                        6,
+                        4,
+                        color.stroke_width(1),
+                    ))
+                    .map_err(err)?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(err)?;
+        Ok(())
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

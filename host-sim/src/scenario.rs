@@ -27,7 +27,15 @@ use std::path::{Path, PathBuf};
 use toml::Spanned;
 
 /// The system-specific sections a scenario may contain.
-pub const SECTIONS: [&str; 6] = ["plant", "effects", "faults", "noise", "sensors", "filter"];
+pub const SECTIONS: [&str; 7] = [
+    "plant",
+    "effects",
+    "faults",
+    "noise",
+    "sensors",
+    "sensor_faults",
+    "filter",
+];
 
 /// How long one run lasts.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,6 +73,85 @@ pub struct Scenario {
     pub alpha: f64,
     /// Input profiles by input channel name.
     pub inputs: BTreeMap<String, InputProfile>,
+    /// Faults the host injects between the sensor and the estimator (`[sensor_faults]`).
+    pub sensor_faults: SensorFaults,
+}
+
+/// `[sensor_faults]`: faults injected into every measurement channel after the sensor
+/// model, on their own seeded random stream (so a faulty run sees the same sensor noise as
+/// the clean run of the same seed). All default to off.
+///
+/// ```toml
+/// [sensor_faults]
+/// dropout_probability = 0.05    # a sample is missing (NaN)
+/// outlier_probability = 0.01    # a spike: y + outlier_std * N(0, 1)
+/// outlier_std = 1.0
+/// stuck_probability = 0.002     # the channel freezes at its last value ...
+/// stuck_samples = 20            # ... for this many samples
+/// nan_burst_probability = 0.001 # a run of NaN samples ...
+/// nan_burst_samples = 10        # ... this long
+/// bias_jump_time = 300.0        # from this time on (s) ...
+/// bias_jump = 0.05              # ... every channel reads this much high
+/// jitter_std = 0.1              # the sample time the estimator sees is t + N(0, jitter_std^2)
+///                               # (clamped to +-0.4 dt so time still increases)
+/// ```
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorFaults {
+    pub dropout_probability: f64,
+    pub outlier_probability: f64,
+    pub outlier_std: f64,
+    pub stuck_probability: f64,
+    pub stuck_samples: usize,
+    pub nan_burst_probability: f64,
+    pub nan_burst_samples: usize,
+    pub bias_jump_time: Option<f64>,
+    pub bias_jump: f64,
+    pub jitter_std: f64,
+}
+
+impl SensorFaults {
+    /// True when no fault is configured.
+    pub fn is_off(&self) -> bool {
+        *self == SensorFaults::default()
+    }
+
+    fn check(&self, scenario: &Scenario) -> Result<(), SimError> {
+        let at = |key: &str, message: String| scenario.error_at(&["sensor_faults", key], message);
+        for (key, p) in [
+            ("dropout_probability", self.dropout_probability),
+            ("outlier_probability", self.outlier_probability),
+            ("stuck_probability", self.stuck_probability),
+            ("nan_burst_probability", self.nan_burst_probability),
+        ] {
+            if !(0.0..=1.0).contains(&p) {
+                return Err(at(key, format!("`{key}` must be in [0, 1], found {p}")));
+            }
+        }
+        for (key, v) in [
+            ("outlier_std", self.outlier_std),
+            ("jitter_std", self.jitter_std),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(at(
+                    key,
+                    format!("`{key}` must be a non-negative number, found {v}"),
+                ));
+            }
+        }
+        if !self.bias_jump.is_finite() {
+            return Err(at("bias_jump", "`bias_jump` must be finite".into()));
+        }
+        if let Some(t) = self.bias_jump_time
+            && !t.is_finite()
+        {
+            return Err(at(
+                "bias_jump_time",
+                "`bias_jump_time` must be finite".into(),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// A deterministic input profile `u(t)`, written as an inline table with a `kind`.
@@ -176,6 +263,8 @@ struct RawScenario {
     #[serde(default)]
     sensors: Option<toml::Value>,
     #[serde(default)]
+    sensor_faults: Option<toml::Value>,
+    #[serde(default)]
     filter: Option<toml::Value>,
 }
 
@@ -201,6 +290,7 @@ impl Scenario {
             &raw.faults,
             &raw.noise,
             &raw.sensors,
+            &raw.sensor_faults,
             &raw.filter,
         );
         let name = raw.name.get_ref();
@@ -270,7 +360,7 @@ impl Scenario {
                 .map_err(|m| bad(profile.span().start, format!("input `{channel}`: {m}")))?;
             inputs.insert(channel, profile.into_inner());
         }
-        Ok(Scenario {
+        let mut scenario = Scenario {
             path: path.to_path_buf(),
             text: text.to_string(),
             name: raw.name.into_inner(),
@@ -283,7 +373,11 @@ impl Scenario {
             stop_at_eol: raw.stop_at_eol,
             alpha,
             inputs,
-        })
+            sensor_faults: SensorFaults::default(),
+        };
+        scenario.sensor_faults = scenario.section("sensor_faults")?;
+        scenario.sensor_faults.check(&scenario)?;
+        Ok(scenario)
     }
 
     /// Number of samples after t = 0 (the run logs `samples + 1` rows unless it stops at EOL).

@@ -1,7 +1,9 @@
 //! Electric-scooter campaigns (Yu et al. 2020): the truth plant in lockstep with the core's
 //! FDI and UKF/AUKF/AEUKF, and the reproduction of Tables 4 and 6.
 
+use crate::lockstep::FaultInjector;
 use crate::plants::scooter::{Profile, ScooterPlant, SensorNoise};
+use crate::scenario::SensorFaults;
 use prognos_core::filter::adaptive_ukf::Adaptation;
 use prognos_core::pipeline::scooter::{Scooter, ScooterConfig};
 use prognos_core::plants::scooter::{BETA_THETA_R, K1, R_RV};
@@ -43,11 +45,27 @@ pub struct RunTrace {
     /// RUL predictions, and whether a reactivation was refused by Eq. 9.
     pub predictions: Vec<RulPrediction>,
     pub refused_reactivation: bool,
+    /// Samples the pipeline rejected (only with injected faults).
+    pub rejected: usize,
 }
 
 /// Runs one experiment with one filter variant: the truth plant in lockstep with the core's
 /// [`Scooter`] pipeline in scalar type `T`.
 pub fn run_with<T: Real>(profile: Profile, mode: Adaptation, seed: u64) -> RunTrace {
+    run_with_faults::<T>(profile, mode, seed, SensorFaults::default())
+}
+
+/// [`run_with`] with sensor faults injected between the plant's sensors and the pipeline
+/// (the host's [`FaultInjector`], seeded from `seed`). A sample the pipeline rejects leaves
+/// it unchanged (the next sample predicts over the gap) and is counted in
+/// `RunTrace::rejected`; with no faults every sample must be accepted.
+pub fn run_with_faults<T: Real>(
+    profile: Profile,
+    mode: Adaptation,
+    seed: u64,
+    faults: SensorFaults,
+) -> RunTrace {
+    let mut injector = FaultInjector::new(faults, seed);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut plant = ScooterPlant::new(profile, SensorNoise::default(), &mut rng);
     let mut mc_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x005e_ed0f_4a11);
@@ -58,8 +76,17 @@ pub fn run_with<T: Real>(profile: Profile, mode: Adaptation, seed: u64) -> RunTr
         let (u, y) = plant.sample(DT, &mut rng);
         // Time from the sample index: no drift from accumulating dt.
         let t = k as f64 * DT;
+        let mut y = [y[0], y[1], y[2]];
+        let t_seen = injector.apply(t, DT, &mut y);
         let ys = [cast::<T>(y[0]), cast::<T>(y[1]), cast::<T>(y[2])];
-        let report = pipe.step(cast(t), cast(u), &ys).expect("clean samples");
+        let report = match pipe.step(cast(t_seen), cast(u), &ys) {
+            Ok(r) => r,
+            Err(e) => {
+                assert!(!faults.is_off(), "clean sample rejected: {e}");
+                trace.rejected += 1;
+                continue;
+            }
+        };
         if report.active && trace.activation.is_none() {
             trace.activation = Some(t);
         }

@@ -220,8 +220,9 @@ fn killed_campaign_leaves_only_complete_run_files() {
             s(&scenario_path()),
             "--runs",
             "3000",
+            // One worker finishes the runs in index order, so resuming stays short.
             "--jobs",
-            "2",
+            "1",
             "--no-plots",
         ])
         .args(["--out", s(&out)])
@@ -267,6 +268,76 @@ fn killed_campaign_leaves_only_complete_run_files() {
         }
     }
     assert!(finished >= 3, "only {finished} runs finished");
+
+    // `--resume` keeps every finished run as it is (same bytes, file not rewritten) and
+    // completes the rest. Runs are indexed, so resuming the first `m` runs is enough.
+    let finished_runs: Vec<(usize, Vec<u8>, Vec<u8>, std::time::SystemTime)> =
+        std::fs::read_dir(out.join("runs"))
+            .unwrap()
+            .flatten()
+            .filter_map(|e| {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let index: usize = name
+                    .strip_prefix("run_")?
+                    .strip_suffix(".json")?
+                    .parse()
+                    .ok()?;
+                let json = e.path();
+                let csv = json.with_extension("csv");
+                let modified = std::fs::metadata(&json).unwrap().modified().unwrap();
+                Some((index, read(&json), read(&csv), modified))
+            })
+            .collect();
+    let m = finished_runs.iter().map(|f| f.0).max().unwrap() + 2;
+    let o = prognos(&[
+        "campaign",
+        s(&scenario_path()),
+        "--runs",
+        &m.to_string(),
+        "--jobs",
+        "2",
+        "--no-plots",
+        "--no-progress",
+        "--resume",
+        "--out",
+        s(&out),
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout} {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        stdout.contains(&format!("{m} runs ({} resumed)", finished_runs.len())),
+        "{stdout}"
+    );
+    for (index, json, csv, modified) in &finished_runs {
+        let path = out.join(format!("runs/run_{index:04}.json"));
+        assert_eq!(&read(&path), json, "run {index} JSON changed");
+        assert_eq!(
+            &read(&path.with_extension("csv")),
+            csv,
+            "run {index} CSV changed"
+        );
+        let now = std::fs::metadata(&path).unwrap().modified().unwrap();
+        assert_eq!(&now, modified, "run {index} was redone");
+    }
+    for run in 0..m {
+        let json = out.join(format!("runs/run_{run:04}.json"));
+        let metrics: RunMetrics =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let series = read_series(&json.with_extension("csv")).unwrap();
+        assert_eq!(series.rows.len(), metrics.rows, "run {run}");
+    }
+    assert!(out.join("summary.json").is_file());
+    let leftovers: Vec<String> = std::fs::read_dir(out.join("runs"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(leftovers.is_empty(), "temporaries left: {leftovers:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -6,3 +6,4 @@ pub mod drag_radar;
 pub mod fuzz;
 pub mod linear_gaussian;
 pub mod reference;
+pub mod workloads;

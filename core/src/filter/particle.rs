@@ -287,7 +287,9 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
         );
         for (p, ok) in self.particles.iter_mut().zip(self.scratch.iter_mut()) {
             let mut next = model.sample_step(p, u, dt, rng);
-            for (x, s) in next.iter_mut().zip(walk.iter()) {
+            // Slice iterators: nalgebra's matrix iterators cost several times more per entry
+            // in this per-particle loop (callgrind, docs/results.md); same order, same result.
+            for (x, s) in next.as_mut_slice().iter_mut().zip(walk.as_slice()) {
                 if *s > T::zero() {
                     *x += *s * standard_normal::<T, R>(rng);
                 }
@@ -477,7 +479,7 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
         let std = (hi - lo).component_mul(&self.config.roughening) * shrink;
         let (lower, upper) = (self.config.lower, self.config.upper);
         for p in self.particles.iter_mut() {
-            for (x, s) in p.iter_mut().zip(std.iter()) {
+            for (x, s) in p.as_mut_slice().iter_mut().zip(std.as_slice()) {
                 if *s > T::zero() {
                     *x += *s * standard_normal::<T, R>(rng);
                 }
@@ -520,7 +522,9 @@ fn clamp_into<T: Real, const NX: usize>(
     upper: &SVector<T, NX>,
 ) -> bool {
     let mut moved = false;
-    for ((v, l), u) in x.iter_mut().zip(lower.iter()).zip(upper.iter()) {
+    // Slices, not nalgebra's matrix iterators: this runs for every particle at every step.
+    let entries = x.as_mut_slice().iter_mut();
+    for ((v, l), u) in entries.zip(lower.as_slice()).zip(upper.as_slice()) {
         if *v < *l {
             *v = *l;
             moved = true;

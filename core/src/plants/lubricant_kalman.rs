@@ -15,7 +15,11 @@
 //! - abrupt faults (Table 4): a CUSUM of the normalised innovation squared detects a change
 //!   and enhances the covariance once (flagged [`Flags::COVARIANCE_ENHANCED`]); an isolated
 //!   innovation beyond the gate is rejected ([`Flags::MEASUREMENT_REJECTED`]) so that a single
-//!   outlier does not move the estimate.
+//!   outlier does not move the estimate;
+//! - the measurement variance adapts (covariance matching, as the AUKF of the scooter paper):
+//!   an exponentially weighted mean of `innovation^2 - H P H^T` over the fused, change-free
+//!   intervals raises `R` above its nominal value when the temperature estimate errs more than
+//!   `temperature_std` says, so the change detector does not fire on every orbit.
 
 use nalgebra::{Matrix2, Vector2};
 
@@ -42,6 +46,8 @@ pub struct LossKalmanConfig<T> {
     pub enhancement: Vector2<T>,
     /// NIS above which a measurement that does not complete a change is rejected.
     pub gate: T,
+    /// Forgetting factor of the measurement-variance estimate (0 keeps `R` nominal).
+    pub noise_adaptation: T,
 }
 
 impl<T: Real> LossKalmanConfig<T> {
@@ -57,6 +63,7 @@ impl<T: Real> LossKalmanConfig<T> {
             change_threshold: cast(30.0),
             enhancement: Vector2::new(cast(10.0), cast(0.1)),
             gate: cast(25.0),
+            noise_adaptation: cast(1.0 / 48.0),
         };
         config.check()?;
         Ok(config)
@@ -82,6 +89,9 @@ impl<T: Real> LossKalmanConfig<T> {
         }
         if !positive(self.gate) {
             return Err(Error::InvalidParameter("gate"));
+        }
+        if !(non_negative(self.noise_adaptation) && self.noise_adaptation < T::one()) {
+            return Err(Error::InvalidParameter("noise_adaptation"));
         }
         Ok(())
     }
@@ -113,6 +123,8 @@ pub struct LossKalman<T: Real> {
     covariance: Matrix2<T>,
     cusum: T,
     changes: u32,
+    /// Estimated measurement variance beyond the nominal one (covariance matching).
+    excess_variance: T,
 }
 
 impl<T: Real> LossKalman<T> {
@@ -145,6 +157,7 @@ impl<T: Real> LossKalman<T> {
             ),
             cusum: T::zero(),
             changes: 0,
+            excess_variance: T::zero(),
         })
     }
 
@@ -161,6 +174,11 @@ impl<T: Real> LossKalman<T> {
     /// Covariance of the state.
     pub fn covariance(&self) -> &Matrix2<T> {
         &self.covariance
+    }
+
+    /// Measurement variance estimated beyond the nominal one (covariance matching).
+    pub fn excess_variance(&self) -> T {
+        self.excess_variance
     }
 
     /// How many changes the detector has declared so far.
@@ -209,7 +227,8 @@ impl<T: Real> LossKalman<T> {
         let h = Vector2::new(-m + b * v / curvature, T::one());
         let temperature_term = b * self.config.temperature_std * m * m;
         let r = next.config.relative_noise * next.config.relative_noise
-            + temperature_term * temperature_term;
+            + temperature_term * temperature_term
+            + next.excess_variance;
         let innovation = consumption.ln() - predicted;
         let mut s = (h.transpose() * next.covariance * h).x + r;
         if !(s.finite() && s > T::zero()) {
@@ -234,6 +253,14 @@ impl<T: Real> LossKalman<T> {
             s = (h.transpose() * next.covariance * h).x + r;
         }
         let fused = change_detected || nis <= next.config.gate;
+        if fused && !change_detected {
+            // Covariance matching: E[innovation^2] = H P H^T + R.
+            let hph = s - r;
+            let sample = innovation * innovation - hph - (r - next.excess_variance);
+            let lambda = next.config.noise_adaptation;
+            next.excess_variance =
+                ((T::one() - lambda) * next.excess_variance + lambda * sample).max(T::zero());
+        }
         if fused {
             // Joseph-form update: stays symmetric positive semi-definite under round-off.
             let gain = next.covariance * h / s;
@@ -348,5 +375,45 @@ mod tests {
         assert_eq!(kf.state(), &converged);
         assert!(LossKalmanConfig::new(0.0, 0.05).is_err());
         assert!(LossKalman::new(config, 37.0, 2.0, -1.0, 0.05).is_err());
+    }
+
+    #[test]
+    fn measurement_variance_adapts_so_that_noise_alone_declares_no_change() {
+        use rand_core::SeedableRng;
+        // Data four times noisier than the configuration says (a poor thermometer).
+        let run = |adaptation: f64| {
+            let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(11);
+            let config = LossKalmanConfig {
+                noise_adaptation: adaptation,
+                ..LossKalmanConfig::new(0.0025, 0.0).unwrap()
+            };
+            let mut kf = LossKalman::new(config, 37.0, 2.0, 7.494e-6, 0.05).unwrap();
+            for k in 0..3000 {
+                let temperature = 30.0 + 4.0 * (k as f64 * 0.26).sin();
+                let e = IntervalExposure::constant(240.0, temperature).unwrap();
+                let noise = 0.01 * crate::random::standard_normal::<f64, _>(&mut rng);
+                kf.update(&e, consumption(37.0, 7.494e-6, temperature) * noise.exp())
+                    .unwrap();
+            }
+            kf
+        };
+        let adaptive = run(1.0 / 48.0);
+        let fixed = run(0.0);
+        assert!(
+            fixed.changes_detected() > 20,
+            "fixed R: {}",
+            fixed.changes_detected()
+        );
+        assert!(
+            adaptive.changes_detected() <= 2,
+            "adaptive R: {}",
+            adaptive.changes_detected()
+        );
+        let excess = adaptive.excess_variance();
+        assert!(
+            (excess / (0.01f64.powi(2) - 0.0025f64.powi(2)) - 1.0).abs() < 0.5,
+            "{excess}"
+        );
+        assert!((adaptive.parameters().0 - 37.0).abs() < 0.5);
     }
 }
