@@ -134,6 +134,51 @@ pub enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Sim-to-real gap diagnosis of recorded data against the model named in its meta file:
+    /// where the model disagrees, which unmodelled effect explains it, how far it shrinks.
+    /// Writes verdict.json, report.md and report.html.
+    Gap {
+        /// Recorded data CSV (`t`, `u:*`, `y:*`, optional `x:*`).
+        #[arg(long)]
+        data: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Meta file [default: `<data>.meta.toml` beside the data].
+        #[arg(long)]
+        meta: Option<PathBuf>,
+    },
+    /// Proves `prognos gap` on generated data whose effect it is not told about (or on a
+    /// folder of labelled datasets) and prints attribution, localisation and shrink.
+    GapBench {
+        /// Plants to generate for (comma separated).
+        #[arg(long, default_value = "reaction_wheel,dc_motor", value_delimiter = ',')]
+        plants: Vec<String>,
+        /// Seeds per effect and ratio.
+        #[arg(long, default_value_t = 3)]
+        seeds: usize,
+        /// Effect-to-noise ratios (comma separated).
+        #[arg(long, default_value = "0.5,1,2,4,8", value_delimiter = ',')]
+        ratios: Vec<f64>,
+        /// Base seed.
+        #[arg(long, default_value_t = 2026)]
+        seed: u64,
+        /// Only these catalogue effects for the single-effect sets (comma separated).
+        #[arg(long, value_delimiter = ',')]
+        only: Vec<String>,
+        /// Per plant: no-effect sets, pair sets, and sets per out-of-catalogue effect.
+        #[arg(long, default_value_t = 12)]
+        extra_sets: usize,
+        /// Diagnose the labelled datasets in this folder instead of generating.
+        #[arg(long)]
+        datasets: Option<PathBuf>,
+        /// Also write the generated datasets to this folder.
+        #[arg(long)]
+        write_datasets: Option<PathBuf>,
+        /// Write bench.json and summary.txt here.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Edge-cloud prognosis (AR model-of-signals on the edge, particle filter in the cloud)
     /// of one bearing vibration file (PRONOSTIA format, see data/pronostia/README.md).
     EdgeCloud {
@@ -390,6 +435,81 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             } else {
                 Err(SimError::Run(format!("soak failed: {}", failed.join(", "))))
             }
+        }
+        Command::Gap { data, out, meta } => {
+            let started = Instant::now();
+            let diagnosis = crate::gap::diagnose_files(&data, meta.as_deref())?;
+            let files = crate::gap::report::write_report(&out, &diagnosis)?;
+            let l = &diagnosis.location;
+            println!("plant: {}", diagnosis.plant);
+            println!("verdict: {}", diagnosis.verdict);
+            println!(
+                "where: {} / {} / window [{:.2}, {:.2}] s / band [{:.4}, {:.4}] Hz (NIS {:.3}, adjusted p {:.2e})",
+                l.channel,
+                l.regime,
+                l.window[0],
+                l.window[1],
+                l.band_hz[0],
+                l.band_hz[1],
+                l.statistic,
+                l.p_value
+            );
+            let rows: Vec<Vec<String>> = diagnosis
+                .ranking
+                .iter()
+                .take(5)
+                .map(|e| {
+                    vec![
+                        e.effect.clone(),
+                        format!("{:.1}", e.score),
+                        format!("{:.3}", e.gap_before),
+                        format!("{:.3}", e.gap_after),
+                        format!("{:.3}", e.shrink),
+                    ]
+                })
+                .collect();
+            print!(
+                "{}",
+                format_table(
+                    &["effect", "score", "gap before", "gap after", "shrink"],
+                    &rows
+                )
+            );
+            println!("({:.1} s)", started.elapsed().as_secs_f64());
+            for f in files {
+                println!("wrote {}", f.display());
+            }
+            Ok(())
+        }
+        Command::GapBench {
+            plants,
+            seeds,
+            ratios,
+            seed,
+            only,
+            extra_sets,
+            datasets,
+            write_datasets,
+            out,
+        } => {
+            let opts = crate::gap::bench::BenchOptions {
+                plants,
+                seeds,
+                ratios,
+                seed,
+                only,
+                extra_sets,
+            };
+            let started = Instant::now();
+            let (_, text) = crate::gap::bench::run_bench(
+                &opts,
+                datasets.as_deref(),
+                write_datasets.as_deref(),
+                out.as_deref(),
+            )?;
+            print!("{text}");
+            println!("({:.1} s)", started.elapsed().as_secs_f64());
+            Ok(())
         }
         Command::EdgeCloud { .. } => Err(SimError::Run(
             "edge-cloud is handled before dispatch".into(),

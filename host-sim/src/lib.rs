@@ -16,6 +16,7 @@ pub mod dataio;
 pub mod edge_cloud;
 pub mod error;
 pub mod faults;
+pub mod gap;
 pub mod linear_degradation;
 pub mod lockstep;
 pub mod output;

@@ -1,0 +1,1157 @@
+//! `prognos gap-bench`: the diagnoser on data whose effect it is not told about.
+//!
+//! For each plant, datasets are generated from the *truth* plant (the reaction wheel's
+//! `plants::reaction_wheel::TruthWheel` with every term switchable; the DC motor's equations
+//! integrated with 4x finer steps and the extra torques) with: one catalogue effect at each
+//! effect-to-noise ratio (ENR) and seed; no effect; two effects; an effect outside the
+//! catalogue. The ENR of an effect is the RMS over the record of what it changes in the
+//! noise-free measurement divided by the sensor noise std, on the channel it changes most
+//! (that channel is the localisation target); the magnitude that gives each ENR is found by
+//! bisection. The diagnoser sees only the CSV and a meta file with `plant` and `dt` (noise
+//! is estimated from the data). Datasets can also be read from a folder (`--datasets`): each
+//! `NAME.csv` with `NAME.csv.meta.toml` and a label `NAME.csv.label.toml` (`kind` = single |
+//! none | pair | unknown, `effects` = [...], `channel`, `ratio`) that only the bench reads.
+
+use crate::dataio::{Recording, TimeSeries, parse_recording};
+use crate::error::SimError;
+use crate::gap::dc_motor::{DcMotorPlant, simulate_motor};
+use crate::gap::diagnose::diagnose_recording;
+use crate::gap::effects::GenericKind;
+use crate::gap::meta::parse_gap_meta;
+use crate::gap::plant::{GapPlant, PlantData};
+use crate::lockstep::{SimRng, standard_normal, stream_rng, uniform};
+use crate::output::{format_table, write_json, write_text};
+use crate::plants::reaction_wheel::{TruthWheel, WheelEffects, WheelSensors};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// What a dataset contains.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CaseKind {
+    /// One catalogue effect.
+    Single,
+    /// No effect.
+    None,
+    /// Two catalogue effects.
+    Pair,
+    /// An effect outside the catalogue.
+    Unknown,
+}
+
+/// The label of one dataset (what the bench knows and the diagnoser does not).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Label {
+    /// Kind.
+    pub kind: CaseKind,
+    /// Effect names as the diagnoser names them (`kind:channel` for generic ones); the
+    /// out-of-catalogue effect's own name for `unknown`.
+    #[serde(default)]
+    pub effects: Vec<String>,
+    /// The channel the effect changes most (`y:<name>`).
+    #[serde(default)]
+    pub channel: Option<String>,
+    /// Effect-to-noise ratio (per effect for pairs).
+    #[serde(default)]
+    pub ratio: f64,
+}
+
+/// One dataset to diagnose.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    /// Name (file stem).
+    pub name: String,
+    /// CSV text.
+    pub csv: String,
+    /// Meta text.
+    pub meta: String,
+    /// Label.
+    pub label: Label,
+}
+
+/// One diagnosis of a dataset.
+#[derive(Clone, Debug, Serialize)]
+pub struct Outcome {
+    /// Dataset name.
+    pub name: String,
+    /// Label.
+    pub label: Label,
+    /// Verdict.
+    pub verdict: String,
+    /// The first three ranking entries.
+    pub top3: Vec<String>,
+    /// Located channel.
+    pub channel: String,
+    /// Held-out shrink of the verdict's effect (0 for none / unknown).
+    pub shrink: f64,
+}
+
+impl Outcome {
+    fn top1(&self) -> bool {
+        match self.label.kind {
+            CaseKind::Single => self.verdict == self.label.effects[0],
+            CaseKind::Pair => same_set(&self.verdict, &self.label.effects),
+            CaseKind::None => self.verdict == "none",
+            CaseKind::Unknown => self.verdict == "unknown",
+        }
+    }
+    fn top3_hit(&self) -> bool {
+        match self.label.kind {
+            CaseKind::Single => self.top3.iter().any(|e| *e == self.label.effects[0]),
+            _ => self.top1(),
+        }
+    }
+    /// Both effects among the three best single effects, or the verdict is the pair.
+    fn pair_in_top3(&self) -> bool {
+        same_set(&self.verdict, &self.label.effects)
+            || self.label.effects.iter().all(|e| self.top3.contains(e))
+    }
+    fn localised(&self) -> bool {
+        self.label.channel.as_deref() == Some(self.channel.as_str())
+    }
+}
+
+fn same_set(verdict: &str, effects: &[String]) -> bool {
+    let mut a: Vec<&str> = verdict.split('+').collect();
+    let mut b: Vec<&str> = effects.iter().map(String::as_str).collect();
+    a.sort_unstable();
+    b.sort_unstable();
+    a == b
+}
+
+/// Bench settings.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    /// Plants to generate for (`reaction_wheel`, `dc_motor`).
+    pub plants: Vec<String>,
+    /// Seeds per (effect, ratio).
+    pub seeds: usize,
+    /// Effect-to-noise ratios.
+    pub ratios: Vec<f64>,
+    /// Base seed.
+    pub seed: u64,
+    /// Only these effects (all when empty).
+    pub only: Vec<String>,
+    /// Datasets of each extra kind per plant: this many with no effect, this many pairs,
+    /// and this many per out-of-catalogue effect (ratios cycling 2, 4, 8).
+    pub extra_sets: usize,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        Self {
+            plants: vec!["reaction_wheel".into(), "dc_motor".into()],
+            seeds: 3,
+            ratios: vec![0.5, 1.0, 2.0, 4.0, 8.0],
+            seed: 2026,
+            only: Vec::new(),
+            extra_sets: 12,
+        }
+    }
+}
+
+/// Noise-free run of a truth plant: time, inputs and the measured channels.
+#[derive(Clone, Debug)]
+struct Clean {
+    t: Vec<f64>,
+    inputs: Vec<(String, Vec<f64>)>,
+    outputs: Vec<Vec<f64>>,
+}
+
+/// A truth plant the bench can generate from.
+trait BenchPlant: Sync {
+    fn plant(&self) -> &'static str;
+    fn dt(&self) -> f64;
+    fn outputs(&self) -> Vec<&'static str>;
+    fn sigma(&self) -> Vec<f64>;
+    /// Catalogue effects the truth can switch on, with the range searched for a magnitude.
+    fn plant_effects(&self) -> Vec<(&'static str, f64, f64, bool)>;
+    /// Out-of-catalogue effects, with magnitude ranges.
+    fn unknown_effects(&self) -> Vec<(&'static str, f64, f64, bool)>;
+    /// The noise-free run for `seed` with effects `(name, magnitude)` on.
+    fn clean(&self, seed: u64, effects: &[(&str, f64)]) -> Clean;
+}
+
+struct WheelBench;
+
+/// Truth sub-steps per 20 Hz sample.
+const WHEEL_SUBSTEPS: usize = 20;
+
+impl BenchPlant for WheelBench {
+    fn plant(&self) -> &'static str {
+        "reaction_wheel"
+    }
+    fn dt(&self) -> f64 {
+        0.05
+    }
+    fn outputs(&self) -> Vec<&'static str> {
+        vec!["current", "speed"]
+    }
+    fn sigma(&self) -> Vec<f64> {
+        vec![
+            WheelSensors::LOW_NOISE.current_std,
+            WheelSensors::LOW_NOISE.speed_std,
+        ]
+    }
+    fn plant_effects(&self) -> Vec<(&'static str, f64, f64, bool)> {
+        vec![
+            ("coulomb_friction", 1e-9, 1e-1, true),
+            ("torque_ripple", 1e-3, 1e4, true),
+            ("cogging", 1e-9, 1e-1, true),
+            ("driver_lowpass", 0.05, 1000.0, true),
+            ("backemf_limit", 8.0, 40.0, false),
+            ("speed_limiter", 50.0, 1200.0, false),
+            ("lubricant_torque_noise", 1e-7, 10.0, true),
+            ("viscous_temperature", 1e-12, 1e-5, true),
+        ]
+    }
+    fn unknown_effects(&self) -> Vec<(&'static str, f64, f64, bool)> {
+        vec![
+            ("bearing_defect_torque_0.7hz", 1e-9, 1e-1, true),
+            ("load_torque_step_midway", 1e-9, 1e-1, true),
+        ]
+    }
+    fn clean(&self, seed: u64, effects: &[(&str, f64)]) -> Clean {
+        let dt = self.dt();
+        let n = 6000usize;
+        let mut rng = stream_rng(seed, 11);
+        let hold = (25.0 / dt) as usize;
+        let levels: Vec<f64> = (0..n.div_ceil(hold))
+            .map(|i| {
+                if i == 0 {
+                    2.0 + 2.5 * uniform(&mut rng)
+                } else {
+                    -4.5 + 9.0 * uniform(&mut rng)
+                }
+            })
+            .collect();
+        let temp_phase = std::f64::consts::TAU * uniform(&mut rng);
+        let noise_phase = std::f64::consts::TAU * uniform(&mut rng);
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let command: Vec<f64> = (0..n).map(|k| levels[k / hold]).collect();
+        let temperature: Vec<f64> = t
+            .iter()
+            .map(|t| 23.0 + 5.0 * (std::f64::consts::TAU * t / 300.0 + temp_phase).sin())
+            .collect();
+        let mut wheel = TruthWheel::new();
+        wheel.effects = WheelEffects {
+            driver_lowpass: false,
+            emf_limiting: false,
+            speed_limiter: false,
+            coulomb_friction: false,
+            viscous_temperature: false,
+            torque_ripple: false,
+            cogging: false,
+            torque_noise: false,
+        };
+        wheel.noise_phase = noise_phase;
+        let frozen_viscous = wheel.params.viscous_coefficient(23.0);
+        let (mut defect, mut load_step) = (0.0, 0.0);
+        for &(name, m) in effects {
+            let (e, p) = (&mut wheel.effects, &mut wheel.params);
+            match name {
+                "coulomb_friction" => (e.coulomb_friction, p.coulomb_friction) = (true, m),
+                "torque_ripple" => (e.torque_ripple, p.torque_ripple) = (true, m),
+                "cogging" => (e.cogging, p.cogging) = (true, m),
+                "driver_lowpass" => (e.driver_lowpass, p.driver_bandwidth) = (true, m),
+                "backemf_limit" => (e.emf_limiting, p.bus_voltage) = (true, m),
+                "speed_limiter" => (e.speed_limiter, p.overspeed) = (true, m),
+                "lubricant_torque_noise" => (e.torque_noise, p.noise_angle) = (true, m),
+                "viscous_temperature" => {
+                    // Keep c_v(23 degC) at the model's value: only the dependence is new.
+                    e.viscous_temperature = true;
+                    p.viscous_slope = m;
+                    p.viscous_base = frozen_viscous + m * 53.0;
+                }
+                "bearing_defect_torque_0.7hz" => defect = m,
+                "load_torque_step_midway" => load_step = m,
+                _ => {}
+            }
+        }
+        // Sub-steps: stable RK4 for driver bandwidths up to 1000 rad/s; the limiters'
+        // algebraic loop follows the speed within a sample.
+        let substeps = if wheel.effects.driver_lowpass {
+            WHEEL_SUBSTEPS
+        } else if wheel.effects.emf_limiting || wheel.effects.speed_limiter {
+            4
+        } else {
+            1
+        };
+        wheel.settle(command[0], temperature[0]);
+        let (mut current, mut speed, mut angle) = (Vec::new(), Vec::new(), Vec::new());
+        let inertia = wheel.params.inertia;
+        let omega_d = std::f64::consts::TAU * 0.7;
+        for k in 0..n {
+            current.push(wheel.current);
+            speed.push(wheel.speed);
+            angle.push(wheel.angle);
+            let t0 = wheel.time;
+            for _ in 0..substeps {
+                wheel.step(command[k], temperature[k], dt / substeps as f64);
+            }
+            // Extra torques outside the truth plant's equations, integrated exactly over
+            // the step and added to the speed (operator splitting).
+            if defect != 0.0 {
+                wheel.speed += defect * ((omega_d * t0).cos() - (omega_d * (t0 + dt)).cos())
+                    / omega_d
+                    / inertia;
+            }
+            if load_step != 0.0 && t0 >= 150.0 {
+                wheel.speed -= load_step * dt / inertia;
+            }
+        }
+        Clean {
+            t,
+            inputs: vec![
+                ("command".into(), command),
+                ("temperature".into(), temperature),
+                ("angle".into(), angle),
+            ],
+            outputs: vec![current, speed],
+        }
+    }
+}
+
+struct MotorBench;
+
+impl BenchPlant for MotorBench {
+    fn plant(&self) -> &'static str {
+        "dc_motor"
+    }
+    fn dt(&self) -> f64 {
+        0.01
+    }
+    fn outputs(&self) -> Vec<&'static str> {
+        vec!["current", "speed"]
+    }
+    fn sigma(&self) -> Vec<f64> {
+        vec![0.02, 0.5]
+    }
+    fn plant_effects(&self) -> Vec<(&'static str, f64, f64, bool)> {
+        vec![
+            ("coulomb_friction", 1e-7, 1.0, true),
+            ("brush_drop", 1e-4, 5.0, true),
+        ]
+    }
+    fn unknown_effects(&self) -> Vec<(&'static str, f64, f64, bool)> {
+        vec![
+            ("load_ripple_7hz", 1e-7, 1.0, true),
+            ("load_torque_step_midway", 1e-7, 1.0, true),
+        ]
+    }
+    fn clean(&self, seed: u64, effects: &[(&str, f64)]) -> Clean {
+        let dt = self.dt();
+        let n = 2000usize;
+        let mut rng = stream_rng(seed, 12);
+        let hold = (1.0 / dt) as usize;
+        let levels: Vec<f64> = (0..n.div_ceil(hold))
+            .map(|_| -12.0 + 24.0 * uniform(&mut rng))
+            .collect();
+        let load_levels: Vec<f64> = (0..n.div_ceil(2 * hold))
+            .map(|_| 0.02 * uniform(&mut rng))
+            .collect();
+        let mut data = PlantData {
+            dt,
+            ..Default::default()
+        };
+        data.t = (0..n).map(|k| k as f64 * dt).collect();
+        data.inputs
+            .insert("voltage".into(), (0..n).map(|k| levels[k / hold]).collect());
+        data.inputs.insert(
+            "load_torque".into(),
+            (0..n).map(|k| load_levels[k / (2 * hold)]).collect(),
+        );
+        let mut params = DcMotorPlant.default_params();
+        let mut active = Vec::new();
+        let (mut ripple, mut step) = (0.0, 0.0);
+        for &(name, m) in effects {
+            match name {
+                "coulomb_friction" | "brush_drop" => {
+                    params.insert(name.to_string(), m);
+                    active.push(name);
+                }
+                "load_ripple_7hz" => ripple = m,
+                "load_torque_step_midway" => step = m,
+                _ => {}
+            }
+        }
+        let omega = std::f64::consts::TAU * 7.0;
+        let extra = move |t: f64| ripple * (omega * t).sin() + if t >= 10.0 { step } else { 0.0 };
+        // Start at rest: the diagnoser sees the first measurement, the truth starts at 0.
+        let sim = simulate_motor(&params, &active, &data, 4, &extra).unwrap_or_default();
+        Clean {
+            t: data.t.clone(),
+            inputs: data.inputs.into_iter().collect(),
+            outputs: sim.outputs,
+        }
+    }
+}
+
+fn rms_ratio(a: &[Vec<f64>], b: &[Vec<f64>], sigma: &[f64]) -> (f64, usize) {
+    let mut best = (0.0, 0usize);
+    for c in 0..a.len().min(b.len()) {
+        let n = a[c].len().max(1) as f64;
+        let r = (a[c]
+            .iter()
+            .zip(&b[c])
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt()
+            / sigma[c];
+        let r = if r.is_finite() { r } else { f64::INFINITY };
+        if r > best.0 {
+            best = (r, c);
+        }
+    }
+    best
+}
+
+/// Finds the magnitude in `[lo, hi]` whose ENR is `target` (bisection on the search scale;
+/// the ENR is monotone in the magnitude). `None` when the range cannot reach it.
+fn solve_magnitude(
+    enr: &dyn Fn(f64) -> f64,
+    lo: f64,
+    hi: f64,
+    log: bool,
+    target: f64,
+) -> Option<f64> {
+    let at = |u: f64| {
+        if log {
+            (lo.ln() + u * (hi.ln() - lo.ln())).exp()
+        } else {
+            lo + u * (hi - lo)
+        }
+    };
+    let (e0, e1) = (enr(at(0.0)), enr(at(1.0)));
+    if std::env::var_os("GAP_BENCH_DEBUG").is_some() {
+        eprintln!("enr range [{lo}, {hi}]: {e0} .. {e1}, target {target}");
+    }
+    let increasing = e1 > e0;
+    let (min, max) = if increasing { (e0, e1) } else { (e1, e0) };
+    if !(target > min && target < max) {
+        return None;
+    }
+    let (mut a, mut b) = (0.0, 1.0);
+    for _ in 0..24 {
+        let m = 0.5 * (a + b);
+        let e = enr(at(m));
+        if (e < target) == increasing {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    Some(at(0.5 * (a + b)))
+}
+
+/// Applies a generic effect to a clean channel (quantisation is applied after the noise).
+fn apply_generic(kind: GenericKind, p: f64, y: &[f64], dt: f64) -> Vec<f64> {
+    if kind == GenericKind::Quantisation {
+        y.to_vec()
+    } else {
+        kind.apply(p, y, dt)
+    }
+}
+
+fn generic_range(kind: GenericKind, sigma: f64, amplitude: f64, dt: f64) -> (f64, f64, bool) {
+    match kind {
+        GenericKind::SensorBias => (1e-3 * sigma, 100.0 * sigma, true),
+        GenericKind::SensorScale => (1e-8, 0.5, true),
+        GenericKind::Quantisation => (0.01 * sigma, 100.0 * sigma, true),
+        GenericKind::MeasurementDelay => (0.01 * dt, 25.0 * dt, true),
+        GenericKind::OutputSaturation => (0.05 * amplitude, amplitude, false),
+        GenericKind::DeadZone => (1e-6 * amplitude, 0.5 * amplitude, true),
+        GenericKind::FirstOrderLag => (0.01 * dt, 200.0 * dt, true),
+    }
+}
+
+struct Spec {
+    plant_effects: Vec<(String, f64)>,
+    generic: Vec<(GenericKind, usize, f64)>,
+}
+
+fn noisy(bp: &dyn BenchPlant, clean: &Clean, spec: &Spec, seed: u64) -> Vec<Vec<f64>> {
+    let sigma = bp.sigma();
+    let mut rng: SimRng = stream_rng(seed, 13);
+    let mut out: Vec<Vec<f64>> = clean.outputs.clone();
+    for &(kind, ch, p) in &spec.generic {
+        out[ch] = apply_generic(kind, p, &out[ch], bp.dt());
+    }
+    for (c, y) in out.iter_mut().enumerate() {
+        for v in y.iter_mut() {
+            *v += sigma[c] * standard_normal(&mut rng);
+        }
+    }
+    for &(kind, ch, p) in &spec.generic {
+        if kind == GenericKind::Quantisation {
+            out[ch] = kind.apply(p, &out[ch], bp.dt());
+        }
+    }
+    out
+}
+
+fn to_csv(bp: &dyn BenchPlant, clean: &Clean, measured: &[Vec<f64>]) -> String {
+    let mut header = vec!["t".to_string()];
+    header.extend(clean.inputs.iter().map(|(n, _)| format!("u:{n}")));
+    header.extend(bp.outputs().iter().map(|n| format!("y:{n}")));
+    let mut ts = TimeSeries::new(header);
+    for k in 0..clean.t.len() {
+        let mut row = vec![clean.t[k]];
+        row.extend(clean.inputs.iter().map(|(_, v)| v[k]));
+        row.extend(measured.iter().map(|v| v[k]));
+        ts.rows.push(row);
+    }
+    let mut buf = Vec::new();
+    let _ = ts.write_csv(&mut buf);
+    String::from_utf8(buf).unwrap_or_default()
+}
+
+fn meta_text(bp: &dyn BenchPlant) -> String {
+    format!(
+        "plant = \"{}\"\ndt = {}\ndescription = \"gap-bench dataset\"\n",
+        bp.plant(),
+        bp.dt()
+    )
+}
+
+/// ENR of a spec (relative to the clean run without effects) and the channel it changes most.
+fn spec_enr(bp: &dyn BenchPlant, seed: u64, base: &Clean, spec: &Spec) -> (f64, usize) {
+    let effects: Vec<(&str, f64)> = spec
+        .plant_effects
+        .iter()
+        .map(|(n, m)| (n.as_str(), *m))
+        .collect();
+    let clean = if effects.is_empty() {
+        base.clone()
+    } else {
+        bp.clean(seed, &effects)
+    };
+    let mut out = clean.outputs.clone();
+    for &(kind, ch, p) in &spec.generic {
+        out[ch] = if kind == GenericKind::Quantisation {
+            // Quantisation error of the noisy signal is what the sensor adds.
+            let noise = noisy(
+                bp,
+                &clean,
+                &Spec {
+                    plant_effects: vec![],
+                    generic: vec![],
+                },
+                seed,
+            );
+            let q = kind.apply(p, &noise[ch], bp.dt());
+            out[ch]
+                .iter()
+                .zip(noise[ch].iter().zip(&q))
+                .map(|(c, (n, qv))| c + qv - n)
+                .collect()
+        } else {
+            apply_generic(kind, p, &out[ch], bp.dt())
+        };
+    }
+    rms_ratio(&out, &base.outputs, &bp.sigma())
+}
+
+/// One component to place at a target ENR.
+#[derive(Clone, Debug)]
+enum Part {
+    Plant(&'static str, f64, f64, bool),
+    Generic(GenericKind, usize),
+}
+
+fn part_name(bp: &dyn BenchPlant, p: &Part) -> String {
+    match p {
+        Part::Plant(n, ..) => n.to_string(),
+        Part::Generic(k, ch) => match bp.outputs().get(*ch) {
+            Some(c) => format!("{}:{c}", k.name()),
+            None => k.name().to_string(),
+        },
+    }
+}
+
+/// The spec of `part` at `target` ENR, or `None` when its range cannot reach it.
+fn place(bp: &dyn BenchPlant, seed: u64, base: &Clean, part: &Part, target: f64) -> Option<Spec> {
+    match part {
+        Part::Plant(name, lo, hi, log) => {
+            let enr = |m: f64| {
+                spec_enr(
+                    bp,
+                    seed,
+                    base,
+                    &Spec {
+                        plant_effects: vec![(name.to_string(), m)],
+                        generic: vec![],
+                    },
+                )
+                .0
+            };
+            let m = solve_magnitude(&enr, *lo, *hi, *log, target)?;
+            Some(Spec {
+                plant_effects: vec![(name.to_string(), m)],
+                generic: vec![],
+            })
+        }
+        Part::Generic(kind, ch) => {
+            let amplitude = base.outputs[*ch].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let (lo, hi, log) = generic_range(*kind, bp.sigma()[*ch], amplitude, bp.dt());
+            let enr = |m: f64| {
+                spec_enr(
+                    bp,
+                    seed,
+                    base,
+                    &Spec {
+                        plant_effects: vec![],
+                        generic: vec![(*kind, *ch, m)],
+                    },
+                )
+                .0
+            };
+            let m = solve_magnitude(&enr, lo, hi, log, target)?;
+            Some(Spec {
+                plant_effects: vec![],
+                generic: vec![(*kind, *ch, m)],
+            })
+        }
+    }
+}
+
+fn dataset(bp: &dyn BenchPlant, name: String, seed: u64, spec: &Spec, label: Label) -> Dataset {
+    let effects: Vec<(&str, f64)> = spec
+        .plant_effects
+        .iter()
+        .map(|(n, m)| (n.as_str(), *m))
+        .collect();
+    let clean = bp.clean(seed, &effects);
+    let measured = noisy(bp, &clean, spec, seed);
+    Dataset {
+        name,
+        csv: to_csv(bp, &clean, &measured),
+        meta: meta_text(bp),
+        label,
+    }
+}
+
+fn bench_plant(name: &str) -> Option<Box<dyn BenchPlant>> {
+    match name {
+        "reaction_wheel" => Some(Box::new(WheelBench)),
+        "dc_motor" => Some(Box::new(MotorBench)),
+        _ => None,
+    }
+}
+
+/// Generates the datasets of one plant.
+pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimError> {
+    let bp = bench_plant(plant)
+        .ok_or_else(|| SimError::Run(format!("gap-bench has no generator for plant `{plant}`")))?;
+    let bp = bp.as_ref();
+    let n_out = bp.outputs().len();
+    let mut parts: Vec<Part> = bp
+        .plant_effects()
+        .into_iter()
+        .map(|(n, lo, hi, log)| Part::Plant(n, lo, hi, log))
+        .collect();
+    for kind in GenericKind::ALL {
+        parts.push(Part::Generic(kind, usize::MAX));
+    }
+    let wanted = |p: &Part| {
+        opts.only.is_empty()
+            || opts.only.iter().any(|o| match p {
+                Part::Plant(n, ..) => o == n,
+                Part::Generic(k, _) => o == k.name(),
+            })
+    };
+    let mut jobs: Vec<(String, u64, Part, f64, CaseKind)> = Vec::new();
+    for part in parts.iter().filter(|p| wanted(p)) {
+        for &ratio in &opts.ratios {
+            for s in 0..opts.seeds {
+                let seed = crate::lockstep::mix_seed(opts.seed, jobs.len() as u64);
+                jobs.push((
+                    format!(
+                        "{plant}-{}-r{ratio}-s{s}",
+                        part_name(bp, part).replace(':', "_")
+                    ),
+                    seed,
+                    part.clone(),
+                    ratio,
+                    CaseKind::Single,
+                ));
+            }
+        }
+    }
+    let mut out: Vec<Dataset> = jobs
+        .par_iter()
+        .filter_map(|(name, seed, part, ratio, _)| {
+            let base = bp.clean(*seed, &[]);
+            // Generic effects go on the seed's preferred channel, else the other one.
+            let candidates: Vec<Part> = match part {
+                Part::Generic(k, _) => {
+                    let first = (*seed as usize) % n_out;
+                    (0..n_out)
+                        .map(|i| Part::Generic(*k, (first + i) % n_out))
+                        .collect()
+                }
+                p => vec![p.clone()],
+            };
+            candidates.iter().find_map(|p| {
+                let spec = place(bp, *seed, &base, p, *ratio)?;
+                let (_, ch) = spec_enr(bp, *seed, &base, &spec);
+                let label = Label {
+                    kind: CaseKind::Single,
+                    effects: vec![part_name(bp, p)],
+                    channel: Some(format!("y:{}", bp.outputs()[ch])),
+                    ratio: *ratio,
+                };
+                Some(dataset(bp, name.clone(), *seed, &spec, label))
+            })
+        })
+        .collect();
+    let extra_seeds = opts.extra_sets;
+    for s in 0..extra_seeds {
+        let seed = crate::lockstep::mix_seed(opts.seed ^ 0xA5A5, s as u64);
+        let label = Label {
+            kind: CaseKind::None,
+            effects: vec![],
+            channel: None,
+            ratio: 0.0,
+        };
+        out.push(dataset(
+            bp,
+            format!("{plant}-none-s{s}"),
+            seed,
+            &Spec {
+                plant_effects: vec![],
+                generic: vec![],
+            },
+            label,
+        ));
+    }
+    // Pairs: two distinct plant effects (or a plant effect and a sensor effect when the
+    // plant has fewer than two), each at ratio 2, 4 or 8.
+    let plant_parts: Vec<Part> = parts
+        .iter()
+        .filter(|p| matches!(p, Part::Plant(..)))
+        .cloned()
+        .collect();
+    let pair_jobs: Vec<(u64, usize)> = (0..extra_seeds)
+        .map(|s| (crate::lockstep::mix_seed(opts.seed ^ 0x5A5A, s as u64), s))
+        .collect();
+    let pairs: Vec<Dataset> = pair_jobs
+        .par_iter()
+        .filter_map(|&(seed, s)| {
+            let mut rng = stream_rng(seed, 21);
+            let i = (uniform(&mut rng) * plant_parts.len() as f64) as usize % plant_parts.len();
+            let second = if plant_parts.len() >= 2 {
+                let mut j = (uniform(&mut rng) * (plant_parts.len() - 1) as f64) as usize
+                    % (plant_parts.len() - 1);
+                if j >= i {
+                    j += 1;
+                }
+                plant_parts[j].clone()
+            } else {
+                let k = GenericKind::ALL[(uniform(&mut rng) * 7.0) as usize % 7];
+                Part::Generic(k, 1 % n_out)
+            };
+            let ratio = [2.0, 4.0, 8.0][s % 3];
+            let base = bp.clean(seed, &[]);
+            let a = place(bp, seed, &base, &plant_parts[i], ratio)?;
+            let b = place(bp, seed, &base, &second, ratio)?;
+            let spec = Spec {
+                plant_effects: a.plant_effects.into_iter().chain(b.plant_effects).collect(),
+                generic: a.generic.into_iter().chain(b.generic).collect(),
+            };
+            let (_, ch) = spec_enr(bp, seed, &base, &spec);
+            let names = vec![part_name(bp, &plant_parts[i]), part_name(bp, &second)];
+            let label = Label {
+                kind: CaseKind::Pair,
+                channel: Some(format!("y:{}", bp.outputs()[ch])),
+                effects: names.clone(),
+                ratio,
+            };
+            Some(dataset(
+                bp,
+                format!(
+                    "{plant}-pair-{}-r{ratio}-s{s}",
+                    names.join("+").replace(':', "_")
+                ),
+                seed,
+                &spec,
+                label,
+            ))
+        })
+        .collect();
+    out.extend(pairs);
+    let unknown_jobs: Vec<(usize, f64, usize)> = (0..bp.unknown_effects().len())
+        .flat_map(|u| (0..extra_seeds).map(move |s| (u, [2.0, 4.0, 8.0][s % 3], s)))
+        .collect();
+    let unknowns: Vec<Dataset> = unknown_jobs
+        .par_iter()
+        .filter_map(|&(u, ratio, s)| {
+            let (name, lo, hi, log) = bp.unknown_effects()[u];
+            let seed = crate::lockstep::mix_seed(
+                opts.seed ^ 0x3C3C,
+                (u * 100 + s) as u64 + (ratio as u64) * 10_000,
+            );
+            let base = bp.clean(seed, &[]);
+            let spec = place(bp, seed, &base, &Part::Plant(name, lo, hi, log), ratio)?;
+            let (_, ch) = spec_enr(bp, seed, &base, &spec);
+            let label = Label {
+                kind: CaseKind::Unknown,
+                effects: vec![name.to_string()],
+                channel: Some(format!("y:{}", bp.outputs()[ch])),
+                ratio,
+            };
+            Some(dataset(
+                bp,
+                format!("{plant}-unknown-{name}-r{ratio}-s{s}"),
+                seed,
+                &spec,
+                label,
+            ))
+        })
+        .collect();
+    out.extend(unknowns);
+    Ok(out)
+}
+
+/// Diagnoses one dataset from its texts alone.
+pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
+    let csv_path = PathBuf::from(format!("{}.csv", d.name));
+    let meta_path = PathBuf::from(format!("{}.csv.meta.toml", d.name));
+    let recording: Recording = parse_recording(&csv_path, &d.csv)?;
+    let meta = parse_gap_meta(&meta_path, &d.meta)?;
+    let diag = diagnose_recording(&csv_path, &recording, &meta)?;
+    let shrink = diag
+        .ranking
+        .iter()
+        .find(|e| e.effect == diag.verdict)
+        .map_or(0.0, |e| e.shrink);
+    Ok(Outcome {
+        name: d.name.clone(),
+        label: d.label.clone(),
+        verdict: diag.verdict.clone(),
+        top3: diag
+            .ranking
+            .iter()
+            .take(3)
+            .map(|e| e.effect.clone())
+            .collect(),
+        channel: diag.location.channel.clone(),
+        shrink,
+    })
+}
+
+/// Reads labelled datasets from a folder (see the module docs).
+pub fn read_datasets(dir: &Path) -> Result<Vec<Dataset>, SimError> {
+    let mut out = Vec::new();
+    let entries = std::fs::read_dir(dir).map_err(|e| SimError::Unreadable {
+        path: dir.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    paths.sort();
+    for csv in paths {
+        let name = csv
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let read = |suffix: &str| -> Result<String, SimError> {
+            let mut p = csv.clone().into_os_string();
+            p.push(suffix);
+            crate::error::read_input(Path::new(&p))
+        };
+        let label_text = read(".label.toml")?;
+        let mut label_path = csv.clone().into_os_string();
+        label_path.push(".label.toml");
+        let label: Label = toml::from_str(&label_text)
+            .map_err(|e| crate::dataio::toml_error(Path::new(&label_path), &label_text, &e))?;
+        out.push(Dataset {
+            name,
+            csv: crate::error::read_input(&csv)?,
+            meta: read(".meta.toml")?,
+            label,
+        });
+    }
+    Ok(out)
+}
+
+/// Writes datasets to a folder in the format [`read_datasets`] reads.
+pub fn write_datasets(dir: &Path, datasets: &[Dataset]) -> Result<(), SimError> {
+    for d in datasets {
+        write_text(&dir.join(format!("{}.csv", d.name)), &d.csv)?;
+        write_text(&dir.join(format!("{}.csv.meta.toml", d.name)), &d.meta)?;
+        let label = toml::to_string(&d.label).map_err(|e| SimError::Run(e.to_string()))?;
+        write_text(&dir.join(format!("{}.csv.label.toml", d.name)), &label)?;
+    }
+    Ok(())
+}
+
+/// Accuracy figures of a set of outcomes.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Scores {
+    /// Single-effect datasets.
+    pub singles: usize,
+    /// Verdict = the effect.
+    pub top1: f64,
+    /// Effect among the first three.
+    pub top3: f64,
+    /// Located channel = the channel the effect changes most.
+    pub localisation: f64,
+    /// Median held-out shrink of the verdict's effect.
+    pub median_shrink: f64,
+    /// No-effect datasets.
+    pub nones: usize,
+    /// Fraction of no-effect datasets with a verdict other than `none`.
+    pub false_attribution: f64,
+    /// Out-of-catalogue datasets.
+    pub unknowns: usize,
+    /// Fraction of them with verdict `unknown`.
+    pub unknown_recall: f64,
+    /// Pair datasets.
+    pub pairs: usize,
+    /// Fraction with both effects among the first three entries.
+    pub pair_in_top3: f64,
+}
+
+fn frac(v: &[&Outcome], f: impl Fn(&Outcome) -> bool) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().filter(|o| f(o)).count() as f64 / v.len() as f64
+    }
+}
+
+/// Scores of the outcomes whose ratio passes `keep` (none-sets always count).
+pub fn score(outcomes: &[Outcome], keep: impl Fn(f64) -> bool) -> Scores {
+    let singles: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.label.kind == CaseKind::Single && keep(o.label.ratio))
+        .collect();
+    let nones: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.label.kind == CaseKind::None)
+        .collect();
+    let unknowns: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.label.kind == CaseKind::Unknown && keep(o.label.ratio))
+        .collect();
+    let pairs: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.label.kind == CaseKind::Pair && keep(o.label.ratio))
+        .collect();
+    let shrinks: Vec<f64> = singles.iter().map(|o| o.shrink).collect();
+    Scores {
+        singles: singles.len(),
+        top1: frac(&singles, Outcome::top1),
+        top3: frac(&singles, Outcome::top3_hit),
+        localisation: frac(&singles, Outcome::localised),
+        median_shrink: crate::gap::stats::median(&shrinks).unwrap_or(f64::NAN),
+        nones: nones.len(),
+        false_attribution: frac(&nones, |o| o.verdict != "none"),
+        unknowns: unknowns.len(),
+        unknown_recall: frac(&unknowns, |o| o.verdict == "unknown"),
+        pairs: pairs.len(),
+        pair_in_top3: frac(&pairs, Outcome::pair_in_top3),
+    }
+}
+
+fn pct(v: f64) -> String {
+    if v.is_nan() {
+        "-".into()
+    } else {
+        format!("{:.1} %", 100.0 * v)
+    }
+}
+
+/// The printed summary: overall at ratio >= 2 against the targets, per ratio, per effect.
+pub fn summary(outcomes: &[Outcome]) -> String {
+    let mut s = String::new();
+    let at2 = score(outcomes, |r| r >= 2.0);
+    s.push_str(&format!(
+        "gap-bench: {} datasets\n\nAt effect-to-noise ratio >= 2 (targets in brackets):\n",
+        outcomes.len()
+    ));
+    let rows = vec![
+        vec![
+            "top-1 attribution".into(),
+            pct(at2.top1),
+            ">= 90 %".into(),
+            at2.singles.to_string(),
+        ],
+        vec![
+            "top-3 attribution".into(),
+            pct(at2.top3),
+            ">= 98 %".into(),
+            at2.singles.to_string(),
+        ],
+        vec![
+            "channel localisation".into(),
+            pct(at2.localisation),
+            ">= 95 %".into(),
+            at2.singles.to_string(),
+        ],
+        vec![
+            "false attribution (no effect)".into(),
+            pct(at2.false_attribution),
+            "<= 5 %".into(),
+            at2.nones.to_string(),
+        ],
+        vec![
+            "unknown recall".into(),
+            pct(at2.unknown_recall),
+            ">= 80 %".into(),
+            at2.unknowns.to_string(),
+        ],
+        vec![
+            "median held-out shrink".into(),
+            format!("{:.3}", at2.median_shrink),
+            ">= 0.8".into(),
+            at2.singles.to_string(),
+        ],
+        vec![
+            "pair: both in top 3".into(),
+            pct(at2.pair_in_top3),
+            ">= 80 %".into(),
+            at2.pairs.to_string(),
+        ],
+    ];
+    s.push_str(&format_table(
+        &["metric", "measured", "target", "datasets"],
+        &rows,
+    ));
+    let mut ratios: Vec<f64> = outcomes
+        .iter()
+        .filter(|o| o.label.kind == CaseKind::Single)
+        .map(|o| o.label.ratio)
+        .collect();
+    ratios.sort_by(f64::total_cmp);
+    ratios.dedup();
+    s.push_str("\nSingle effects per effect-to-noise ratio:\n");
+    let rows: Vec<Vec<String>> = ratios
+        .iter()
+        .map(|&r| {
+            let sc = score(outcomes, |x| x == r);
+            vec![
+                format!("{r}"),
+                sc.singles.to_string(),
+                pct(sc.top1),
+                pct(sc.top3),
+                pct(sc.localisation),
+                format!("{:.3}", sc.median_shrink),
+                pct(sc.unknown_recall),
+                pct(sc.pair_in_top3),
+            ]
+        })
+        .collect();
+    s.push_str(&format_table(
+        &[
+            "ratio",
+            "datasets",
+            "top-1",
+            "top-3",
+            "localisation",
+            "median shrink",
+            "unknown recall",
+            "pair in top 3",
+        ],
+        &rows,
+    ));
+    let mut effects: Vec<String> = outcomes
+        .iter()
+        .filter(|o| o.label.kind == CaseKind::Single)
+        .map(|o| effect_family(&o.label.effects[0]))
+        .collect();
+    effects.sort();
+    effects.dedup();
+    s.push_str("\nPer effect, ratio >= 2 (generic effects over both channels):\n");
+    let rows: Vec<Vec<String>> = effects
+        .iter()
+        .map(|e| {
+            let sub: Vec<Outcome> = outcomes
+                .iter()
+                .filter(|o| {
+                    o.label.kind == CaseKind::Single && effect_family(&o.label.effects[0]) == *e
+                })
+                .cloned()
+                .collect();
+            let sc = score(&sub, |r| r >= 2.0);
+            let lo = score(&sub, |r| r < 2.0);
+            vec![
+                e.clone(),
+                sc.singles.to_string(),
+                pct(sc.top1),
+                pct(sc.top3),
+                pct(sc.localisation),
+                format!("{:.3}", sc.median_shrink),
+                pct(lo.top1),
+            ]
+        })
+        .collect();
+    s.push_str(&format_table(
+        &[
+            "effect",
+            "datasets",
+            "top-1",
+            "top-3",
+            "localisation",
+            "median shrink",
+            "top-1 below 2",
+        ],
+        &rows,
+    ));
+    let misses: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| {
+            o.label.ratio >= 2.0 && !o.top1() || (o.label.kind == CaseKind::None && !o.top1())
+        })
+        .collect();
+    if !misses.is_empty() {
+        s.push_str("\nMisses at ratio >= 2 (dataset: verdict; top 3):\n");
+        for o in misses {
+            s.push_str(&format!(
+                "  {}: {}; {}\n",
+                o.name,
+                o.verdict,
+                o.top3.join(", ")
+            ));
+        }
+    }
+    s
+}
+
+fn effect_family(name: &str) -> String {
+    name.split(':').next().unwrap_or(name).to_string()
+}
+
+/// Generates (or reads), diagnoses and summarises; writes `bench.json` and `summary.txt`
+/// to `out` when given, and the datasets to `write` when given.
+pub fn run_bench(
+    opts: &BenchOptions,
+    datasets_dir: Option<&Path>,
+    write: Option<&Path>,
+    out: Option<&Path>,
+) -> Result<(Vec<Outcome>, String), SimError> {
+    let mut datasets = Vec::new();
+    match datasets_dir {
+        Some(dir) => datasets = read_datasets(dir)?,
+        None => {
+            for p in &opts.plants {
+                datasets.extend(generate(p, opts)?);
+            }
+        }
+    }
+    if let Some(w) = write {
+        write_datasets(w, &datasets)?;
+    }
+    let outcomes: Vec<Outcome> = datasets.par_iter().map(run_one).collect::<Result<_, _>>()?;
+    let text = summary(&outcomes);
+    if let Some(o) = out {
+        write_json(&o.join("bench.json"), &outcomes)?;
+        write_text(&o.join("summary.txt"), &text)?;
+    }
+    Ok((outcomes, text))
+}

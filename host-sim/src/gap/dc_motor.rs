@@ -1,0 +1,251 @@
+//! Worked example of a user plant: a brushed DC motor driving an inertial load (not one of
+//! the papers' systems). Copy this file to diagnose your own system: declare the
+//! parameters, the inputs and outputs, the plant's own candidate effects, a replay, and
+//! the regimes worth telling apart; then register it in
+//! [`crate::gap::plant::builtin_plant`]. The generic sensor catalogue comes for free.
+//!
+//! Model: `L di/dt = V - R i - K w - V_b sign(i)`, `J dw/dt = K i - b w - tau_c sign(w) -
+//! tau_load`. Inputs `u:voltage` (V) and optional `u:load_torque` (N m); outputs
+//! `y:current` (A), `y:speed` (rad/s). Own catalogue: `coulomb_friction` (`tau_c`) and
+//! `brush_drop` (`V_b`, the brush contact voltage drop); both are off in the nominal model.
+
+use crate::gap::plant::{
+    EffectSpec, FitRange, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
+};
+use std::collections::BTreeMap;
+
+/// The DC motor example plant.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DcMotorPlant;
+
+/// Parameters with defaults (a 12 V, 50 W class motor).
+pub const DC_MOTOR_PARAMETERS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "resistance",
+        default: 2.0,
+        doc: "armature resistance R (ohm)",
+    },
+    ParamSpec {
+        name: "inductance",
+        default: 0.01,
+        doc: "armature inductance L (H)",
+    },
+    ParamSpec {
+        name: "motor_constant",
+        default: 0.05,
+        doc: "torque / back-EMF constant K (N m/A = V s/rad)",
+    },
+    ParamSpec {
+        name: "inertia",
+        default: 1.0e-4,
+        doc: "rotor plus load inertia J (kg m^2)",
+    },
+    ParamSpec {
+        name: "viscous_friction",
+        default: 1.0e-5,
+        doc: "b (N m s/rad)",
+    },
+    ParamSpec {
+        name: "coulomb_friction",
+        default: 0.005,
+        doc: "tau_c (N m), coulomb_friction",
+    },
+    ParamSpec {
+        name: "brush_drop",
+        default: 0.5,
+        doc: "V_b (V), brush_drop",
+    },
+    ParamSpec {
+        name: "sign_smoothing",
+        default: 0.5,
+        doc: "speed/current scale of the smooth sign (rad/s, A)",
+    },
+    ParamSpec {
+        name: "substeps",
+        default: 10.0,
+        doc: "RK4 sub-steps per sample",
+    },
+];
+
+/// The motor's own catalogue.
+pub fn dc_motor_effects() -> Vec<EffectSpec> {
+    vec![
+        EffectSpec {
+            name: "coulomb_friction",
+            doc: "dry friction tau_c sign(w)",
+            fit: vec![FitRange {
+                name: "coulomb_friction",
+                lo: 1e-7,
+                hi: 1.0,
+                scale: Scale::Log,
+            }],
+            needs_inputs: Vec::new(),
+        },
+        EffectSpec {
+            name: "brush_drop",
+            doc: "brush contact drop V_b sign(i)",
+            fit: vec![FitRange {
+                name: "brush_drop",
+                lo: 1e-4,
+                hi: 5.0,
+                scale: Scale::Log,
+            }],
+            needs_inputs: Vec::new(),
+        },
+    ]
+}
+
+/// One replay of the motor. `extra_torque(t)` is a disturbance torque the caller adds (the
+/// bench's out-of-catalogue effect; zero for the diagnosis).
+pub fn simulate_motor(
+    params: &Params,
+    active: &[&str],
+    data: &PlantData,
+    substep_factor: u32,
+    extra_torque: &dyn Fn(f64) -> f64,
+) -> Result<Simulation, String> {
+    let g = |n: &str| param(params, n);
+    let (r, l, k, j, b) = (
+        g("resistance"),
+        g("inductance"),
+        g("motor_constant"),
+        g("inertia"),
+        g("viscous_friction"),
+    );
+    if !(r > 0.0 && l > 0.0 && j > 0.0) {
+        return Err("resistance, inductance and inertia must be positive".into());
+    }
+    let tau_c = if active.contains(&"coulomb_friction") {
+        g("coulomb_friction")
+    } else {
+        0.0
+    };
+    let v_b = if active.contains(&"brush_drop") {
+        g("brush_drop")
+    } else {
+        0.0
+    };
+    let smooth = g("sign_smoothing").max(1e-9);
+    let substeps = (g("substeps").max(1.0) as u32) * substep_factor.max(1);
+    let voltage = data.input("voltage").ok_or("missing u:voltage")?;
+    let load = data.input("load_torque");
+    let n = data.len();
+    let mut w = data.first_output("speed").unwrap_or(0.0);
+    let mut i = data.first_output("current").unwrap_or(0.0);
+    let (mut out_i, mut out_w) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let rhs = |i: f64, w: f64, v: f64, tl: f64| {
+        let di = (v - r * i - k * w - v_b * (i / smooth).tanh()) / l;
+        let dw = (k * i - b * w - tau_c * (w / smooth).tanh() - tl) / j;
+        (di, dw)
+    };
+    for s in 0..n {
+        out_i.push(i);
+        out_w.push(w);
+        if s + 1 == n {
+            break;
+        }
+        let dt = data.t[s + 1] - data.t[s];
+        let h = dt / substeps as f64;
+        let v = voltage[s];
+        for m in 0..substeps {
+            let t_mid = data.t[s] + (m as f64 + 0.5) * h;
+            let tl = load.map_or(0.0, |x| x[s]) + extra_torque(t_mid);
+            let (a1, b1) = rhs(i, w, v, tl);
+            let (a2, b2) = rhs(i + 0.5 * h * a1, w + 0.5 * h * b1, v, tl);
+            let (a3, b3) = rhs(i + 0.5 * h * a2, w + 0.5 * h * b2, v, tl);
+            let (a4, b4) = rhs(i + h * a3, w + h * b3, v, tl);
+            i += h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4);
+            w += h / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4);
+        }
+        if !(i.is_finite() && w.is_finite()) {
+            return Err(format!("replay diverged at t = {}", data.t[s]));
+        }
+    }
+    let mut states = BTreeMap::new();
+    states.insert("current".to_string(), out_i.clone());
+    states.insert("speed".to_string(), out_w.clone());
+    Ok(Simulation {
+        outputs: vec![out_i, out_w],
+        states,
+    })
+}
+
+impl GapPlant for DcMotorPlant {
+    fn name(&self) -> &'static str {
+        "dc_motor"
+    }
+
+    fn parameters(&self) -> Vec<ParamSpec> {
+        DC_MOTOR_PARAMETERS.to_vec()
+    }
+
+    fn required_inputs(&self) -> Vec<&'static str> {
+        vec!["voltage"]
+    }
+
+    fn outputs(&self) -> Vec<&'static str> {
+        vec!["current", "speed"]
+    }
+
+    fn effects(&self) -> Vec<EffectSpec> {
+        dc_motor_effects()
+    }
+
+    fn simulate(
+        &self,
+        params: &Params,
+        active: &[&str],
+        data: &PlantData,
+    ) -> Result<Simulation, String> {
+        simulate_motor(params, active, data, 1, &|_| 0.0)
+    }
+
+    fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {
+        let n = data.len();
+        let w = &nominal.outputs[1];
+        let i = &nominal.outputs[0];
+        let w_max = w.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-9);
+        let accel: Vec<f64> = (0..n)
+            .map(|k| {
+                let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+                if b > a {
+                    (w[b] - w[a]) / (data.t[b] - data.t[a])
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let a_max = accel.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-9);
+        let mask = |f: &dyn Fn(usize) -> bool| (0..n).map(f).collect::<Vec<bool>>();
+        vec![
+            Regime {
+                label: "zero_crossing".into(),
+                mask: mask(&|k| w[k].abs() < 0.05 * w_max),
+            },
+            Regime {
+                label: "low_speed".into(),
+                mask: mask(&|k| w[k].abs() < 0.2 * w_max),
+            },
+            Regime {
+                label: "high_speed".into(),
+                mask: mask(&|k| w[k].abs() > 0.7 * w_max),
+            },
+            Regime {
+                label: "reverse".into(),
+                mask: mask(&|k| w[k] < 0.0),
+            },
+            Regime {
+                label: "accelerating".into(),
+                mask: mask(&|k| accel[k].abs() > 0.1 * a_max),
+            },
+            Regime {
+                label: "steady".into(),
+                mask: mask(&|k| accel[k].abs() <= 0.1 * a_max),
+            },
+            Regime {
+                label: "braking".into(),
+                mask: mask(&|k| i[k] * w[k] < 0.0),
+            },
+        ]
+    }
+}

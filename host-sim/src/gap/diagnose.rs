@@ -1,0 +1,554 @@
+//! The diagnosis end to end: read and check the data and meta file, replay the user's
+//! model, find where it disagrees, fit and rank the candidates, decide the verdict.
+
+use crate::dataio::{Recording, read_recording};
+use crate::error::SimError;
+use crate::gap::analysis::{WhereReport, analyse};
+use crate::gap::effects::{Component, Evaluation, Problem, flat_values};
+use crate::gap::meta::{GapMeta, read_gap_meta};
+use crate::gap::plant::{BUILTIN_PLANTS, GapPlant, PlantData, Simulation, builtin_plant};
+use crate::gap::stats::noise_std_from_differences;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::Path;
+
+/// Fewest samples that can be split into training and held-out blocks.
+pub const MIN_SAMPLES: usize = 200;
+/// Number of contiguous blocks; even ones train, odd ones are held out.
+pub const BLOCKS: usize = 10;
+/// A candidate explains the gap when its held-out score beats the user's model by at least
+/// this much (nats, after the parameter penalty) ...
+pub const MIN_SCORE: f64 = 5.0;
+/// ... and it removes at least this fraction of the held-out gap.
+pub const EXPLAIN_SHRINK: f64 = 0.7;
+/// Below this shrink for the best single effect, pairs are tried.
+pub const PAIR_TRIGGER: f64 = 0.8;
+/// How many of the best forward pairs are refined jointly.
+pub const PAIR_POOL: usize = 4;
+
+/// How a channel's noise level was obtained.
+#[derive(Clone, Debug, Serialize)]
+pub struct NoiseLevel {
+    /// Channel.
+    pub channel: String,
+    /// Std (channel units).
+    pub std: f64,
+    /// `meta` (declared in `[noise]`) or `differences` (estimated from the data).
+    pub source: &'static str,
+}
+
+/// Measured, replayed and corrected signals of one channel on one held-out block.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Overlay {
+    /// Channel.
+    pub channel: String,
+    /// Time (s).
+    pub t: Vec<f64>,
+    /// Measured.
+    pub measured: Vec<f64>,
+    /// The user's model.
+    pub nominal: Vec<f64>,
+    /// With the verdict's effect fitted.
+    pub corrected: Vec<f64>,
+}
+
+/// The result of one diagnosis (serialised as `verdict.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Diagnosis {
+    /// Plant name.
+    pub plant: String,
+    /// An effect name, `a+b` for a pair, `none` or `unknown`.
+    pub verdict: String,
+    /// Where the gap lies.
+    #[serde(rename = "where")]
+    pub location: crate::gap::analysis::Location,
+    /// Every candidate, best score first.
+    pub ranking: Vec<Evaluation>,
+    /// Pairs of the best single effects, fitted jointly when no single one explains the
+    /// gap (best score first; empty otherwise).
+    pub pairs: Vec<Evaluation>,
+    /// Noise levels used.
+    pub noise: Vec<NoiseLevel>,
+    /// Effects the user's model already had.
+    pub sim_effects: Vec<String>,
+    /// Samples (all, training, held-out).
+    pub samples: [usize; 3],
+    /// Every test behind `where`.
+    pub tests: Vec<crate::gap::analysis::TestResult>,
+    /// Heat-map cells.
+    #[serde(skip)]
+    pub cells: Vec<crate::gap::analysis::Cell>,
+    /// Residual spectrum of the located channel.
+    #[serde(skip)]
+    pub spectrum: Vec<(f64, f64)>,
+    /// Overlays for the report.
+    #[serde(skip)]
+    pub overlays: Vec<Overlay>,
+}
+
+/// Reads `data` and its meta file (beside it, or `meta`) and diagnoses.
+pub fn diagnose_files(data: &Path, meta: Option<&Path>) -> Result<Diagnosis, SimError> {
+    let gap_meta = read_gap_meta(data, meta)?;
+    let recording = read_recording(data)?;
+    diagnose_recording(data, &recording, &gap_meta)
+}
+
+/// Builds the problem and diagnoses. `csv_path` is used in error messages.
+pub fn diagnose_recording(
+    csv_path: &Path,
+    recording: &Recording,
+    meta: &GapMeta,
+) -> Result<Diagnosis, SimError> {
+    let plant = builtin_plant(&meta.plant.value).ok_or_else(|| {
+        meta.error_at(
+            meta.plant.offset,
+            format!(
+                "unknown plant `{}` (known: {})",
+                meta.plant.value,
+                BUILTIN_PLANTS.join(", ")
+            ),
+        )
+    })?;
+    diagnose_with(plant.as_ref(), csv_path, recording, meta)
+}
+
+fn header_error(csv_path: &Path, message: String) -> SimError {
+    SimError::BadInput {
+        path: csv_path.to_path_buf(),
+        line: 1,
+        column: 1,
+        message,
+    }
+}
+
+/// Diagnoses with any plant (built in or the user's own).
+pub fn diagnose_with(
+    plant: &dyn GapPlant,
+    csv_path: &Path,
+    recording: &Recording,
+    meta: &GapMeta,
+) -> Result<Diagnosis, SimError> {
+    let mut base = plant.default_params();
+    for (name, v) in &meta.model {
+        if !base.contains_key(name) {
+            let known: Vec<&str> = plant.parameters().iter().map(|p| p.name).collect();
+            return Err(meta.error_at(
+                v.offset,
+                format!(
+                    "unknown parameter `{name}` for plant `{}` (known: {})",
+                    plant.name(),
+                    known.join(", ")
+                ),
+            ));
+        }
+        base.insert(name.clone(), v.value);
+    }
+    let catalogue = plant.effects();
+    let mut sim_effects = Vec::new();
+    for e in &meta.sim_effects {
+        if !catalogue.iter().any(|c| c.name == e.value) {
+            let known: Vec<&str> = catalogue.iter().map(|c| c.name).collect();
+            return Err(meta.error_at(
+                e.offset,
+                format!(
+                    "unknown effect `{}` in sim_effects for plant `{}` (known: {})",
+                    e.value,
+                    plant.name(),
+                    known.join(", ")
+                ),
+            ));
+        }
+        sim_effects.push(e.value.clone());
+    }
+    let header = &recording.series.header;
+    for (name, located) in meta
+        .units
+        .iter()
+        .map(|(k, v)| (k, v.offset))
+        .chain(meta.noise.iter().map(|(k, v)| (k, v.offset)))
+    {
+        if !header.iter().any(|h| h == name) {
+            return Err(meta.error_at(
+                located,
+                format!(
+                    "channel `{name}` named in the meta file is not a column of {}",
+                    csv_path.display()
+                ),
+            ));
+        }
+    }
+    for input in plant.required_inputs() {
+        if !recording.inputs.iter().any(|u| u == input) {
+            return Err(header_error(
+                csv_path,
+                format!(
+                    "plant `{}` needs the input column `u:{input}`",
+                    plant.name()
+                ),
+            ));
+        }
+    }
+    let plant_outputs = plant.outputs();
+    let present: Vec<(usize, String)> = plant_outputs
+        .iter()
+        .enumerate()
+        .filter(|(_, o)| recording.measurements.iter().any(|m| m == *o))
+        .map(|(i, o)| (i, o.to_string()))
+        .collect();
+    if present.is_empty() {
+        return Err(header_error(
+            csv_path,
+            format!(
+                "plant `{}` predicts {}, none of which is a `y:` column",
+                plant.name(),
+                plant_outputs
+                    .iter()
+                    .map(|o| format!("y:{o}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ));
+    }
+    let n = recording.series.rows.len();
+    if n < MIN_SAMPLES {
+        return Err(SimError::BadInput {
+            path: csv_path.to_path_buf(),
+            line: n + 1,
+            column: 1,
+            message: format!(
+                "too little data to split: {n} samples, at least {MIN_SAMPLES} are needed \
+                 ({BLOCKS} blocks, alternately training and held out)"
+            ),
+        });
+    }
+    let mut data = plant_data(recording, meta.dt);
+    data.initial_window = plant.initial_window();
+    let measured_dt =
+        crate::gap::stats::median(&data.t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
+            .unwrap_or(meta.dt);
+    if (measured_dt - meta.dt).abs() > 0.1 * meta.dt {
+        return Err(SimError::BadInput {
+            path: meta.path.clone(),
+            line: 1,
+            column: 1,
+            message: format!(
+                "`dt` = {} but the samples of {} are {measured_dt} s apart",
+                meta.dt,
+                csv_path.display()
+            ),
+        });
+    }
+    let train: Vec<bool> = (0..n).map(|k| (k * BLOCKS / n).is_multiple_of(2)).collect();
+    let test: Vec<bool> = train.iter().map(|b| !b).collect();
+    let mut sigma = Vec::new();
+    let mut sigma_dof = Vec::new();
+    let mut noise = Vec::new();
+    let mut measured = Vec::new();
+    for (_, name) in &present {
+        let y = data.outputs[name].clone();
+        let key = format!("y:{name}");
+        let (s, dof, source) = match meta.noise.get(&key) {
+            Some(v) => (v.value, f64::INFINITY, "meta"),
+            None => match noise_std_from_differences(&y) {
+                Some((s, dof)) => (s, dof, "differences"),
+                None => {
+                    return Err(header_error(
+                        csv_path,
+                        format!(
+                            "cannot estimate the noise of `{key}` (constant or too few finite \
+                             samples): declare it in the meta file's [noise] table"
+                        ),
+                    ));
+                }
+            },
+        };
+        sigma.push(s);
+        sigma_dof.push(dof);
+        noise.push(NoiseLevel {
+            channel: key,
+            std: s,
+            source,
+        });
+        measured.push(y);
+    }
+    let plant_effects: Vec<_> = catalogue
+        .into_iter()
+        .filter(|e| !sim_effects.iter().any(|s| s == e.name))
+        .filter(|e| e.needs_inputs.iter().all(|u| data.inputs.contains_key(*u)))
+        .collect();
+    let active: Vec<&str> = sim_effects.iter().map(String::as_str).collect();
+    let nominal_full = plant
+        .simulate(&base, &active, &data)
+        .map_err(|e| SimError::Run(format!("replaying the model failed: {e}")))?;
+    let select = present.iter().map(|(i, _)| *i).collect::<Vec<_>>();
+    let wrapped = SelectPlant {
+        inner: plant,
+        select: select.clone(),
+    };
+    let nominal = select_outputs(&nominal_full, &select);
+    // How the replay depends on each measured initial value (zero for channels the plant
+    // does not initialise from the data).
+    let mut init_sensitivity = Vec::new();
+    for (c, (_, name)) in present.iter().enumerate() {
+        let step = 10.0 * sigma[c];
+        let mut perturbed = data.clone();
+        perturbed.initial_offsets.insert(name.clone(), step);
+        let Ok(sim) = wrapped.simulate(&base, &active, &perturbed) else {
+            continue;
+        };
+        let sens: Vec<Vec<f64>> = sim
+            .outputs
+            .iter()
+            .zip(&nominal.outputs)
+            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) / step).collect())
+            .collect();
+        let matters = sens.iter().flatten().any(|g| g.abs() > 1e-6);
+        if matters && sens.iter().flatten().all(|g| g.is_finite()) {
+            init_sensitivity.push((c, sens, sigma[c]));
+        }
+    }
+    let mut problem = Problem {
+        plant: &wrapped,
+        data: &data,
+        base,
+        sim_effects: sim_effects.clone(),
+        plant_effects,
+        outputs: present.iter().map(|(_, n)| n.clone()).collect(),
+        measured,
+        sigma,
+        sigma_dof,
+        train: train.clone(),
+        test,
+        nominal: nominal.clone(),
+        nominal_raw: nominal,
+        init_sensitivity,
+    };
+    problem.refit_nominal();
+    let report = analyse(&problem);
+    let (verdict, ranking, pairs) = decide(&problem, &report);
+    let overlays = overlays(
+        &problem,
+        &report,
+        ranking.iter().chain(&pairs).find(|e| e.effect == verdict),
+    );
+    Ok(Diagnosis {
+        plant: plant.name().to_string(),
+        verdict,
+        location: report.location.clone(),
+        ranking,
+        pairs,
+        noise,
+        sim_effects,
+        samples: [
+            n,
+            train.iter().filter(|b| **b).count(),
+            train.iter().filter(|b| !**b).count(),
+        ],
+        tests: report.tests.clone(),
+        cells: report.cells.clone(),
+        spectrum: report.spectrum.clone(),
+        overlays,
+    })
+}
+
+/// A plant restricted to the measured subset of its outputs.
+struct SelectPlant<'a> {
+    inner: &'a dyn GapPlant,
+    select: Vec<usize>,
+}
+
+fn select_outputs(sim: &Simulation, select: &[usize]) -> Simulation {
+    Simulation {
+        outputs: select.iter().map(|&i| sim.outputs[i].clone()).collect(),
+        states: sim.states.clone(),
+    }
+}
+
+impl GapPlant for SelectPlant<'_> {
+    fn name(&self) -> &'static str {
+        self.inner.name()
+    }
+    fn parameters(&self) -> Vec<crate::gap::plant::ParamSpec> {
+        self.inner.parameters()
+    }
+    fn required_inputs(&self) -> Vec<&'static str> {
+        self.inner.required_inputs()
+    }
+    fn outputs(&self) -> Vec<&'static str> {
+        let all = self.inner.outputs();
+        self.select.iter().map(|&i| all[i]).collect()
+    }
+    fn effects(&self) -> Vec<crate::gap::plant::EffectSpec> {
+        self.inner.effects()
+    }
+    fn simulate(
+        &self,
+        params: &crate::gap::plant::Params,
+        active: &[&str],
+        data: &PlantData,
+    ) -> Result<Simulation, String> {
+        Ok(select_outputs(
+            &self.inner.simulate(params, active, data)?,
+            &self.select,
+        ))
+    }
+    fn initial_window(&self) -> f64 {
+        self.inner.initial_window()
+    }
+    fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<crate::gap::plant::Regime> {
+        // The plant's regime rules expect all its outputs: rebuild a full-width replay
+        // from the subset (absent channels read from the data or as zeros).
+        let all = self.inner.outputs();
+        let mut full = Simulation {
+            outputs: vec![vec![0.0; data.len()]; all.len()],
+            states: nominal.states.clone(),
+        };
+        for (j, &i) in self.select.iter().enumerate() {
+            full.outputs[i] = nominal.outputs[j].clone();
+        }
+        for (i, name) in all.iter().enumerate() {
+            if !self.select.contains(&i)
+                && let Some(s) = nominal.states.get(*name)
+            {
+                full.outputs[i] = s.clone();
+            }
+        }
+        self.inner.regimes(data, &full)
+    }
+}
+
+/// Converts a recording to the plant's view (missing inputs hold the previous value).
+pub fn plant_data(recording: &Recording, dt: f64) -> PlantData {
+    let s = &recording.series;
+    let col = |role: &str, name: &str| s.column(&format!("{role}:{name}")).unwrap_or_default();
+    let mut data = PlantData {
+        t: s.column("t").unwrap_or_default(),
+        dt,
+        ..Default::default()
+    };
+    for u in &recording.inputs {
+        let mut v = col("u", u);
+        let mut last = v.iter().copied().find(|x| x.is_finite()).unwrap_or(0.0);
+        for x in &mut v {
+            if x.is_finite() {
+                last = *x;
+            } else {
+                *x = last;
+            }
+        }
+        data.inputs.insert(u.clone(), v);
+    }
+    for y in &recording.measurements {
+        data.outputs.insert(y.clone(), col("y", y));
+    }
+    for x in &recording.truth {
+        data.truth.insert(x.clone(), col("x", x));
+    }
+    data
+}
+
+/// Fits every candidate and decides the verdict: when no test rejects, the best single
+/// effect if it explains the gap, else `none`; otherwise the best single effect when it explains
+/// the gap (score >= [`MIN_SCORE`], shrink >= [`EXPLAIN_SHRINK`]) and shrinks it by at least
+/// [`PAIR_TRIGGER`]; else the best pair when it explains the gap and beats the single by
+/// [`MIN_SCORE`] and 0.1 in shrink; else the single when it explains; else `unknown`.
+/// Returns the verdict, the single effects (best first) and the pairs tried.
+pub fn decide(
+    problem: &Problem,
+    report: &WhereReport,
+) -> (String, Vec<Evaluation>, Vec<Evaluation>) {
+    let singles: Vec<Component> = problem.single_candidates();
+    let mut evaluated: Vec<Evaluation> = singles
+        .par_iter()
+        .filter_map(|c| problem.fit(std::slice::from_ref(c), None))
+        .collect();
+    evaluated.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let explains = |e: &Evaluation| e.score >= MIN_SCORE && e.shrink >= EXPLAIN_SHRINK;
+    let Some(best) = evaluated.first().cloned() else {
+        return ("unknown".into(), evaluated, Vec::new());
+    };
+    if !report.location.significant {
+        // No test sees more than noise: a candidate may still explain a small gap the tests
+        // missed, but `unknown` needs a significant gap.
+        let verdict = if explains(&best) {
+            best.effect.clone()
+        } else {
+            "none".into()
+        };
+        return (verdict, evaluated, Vec::new());
+    }
+    if explains(&best) && best.shrink >= PAIR_TRIGGER {
+        return (best.effect.clone(), evaluated, Vec::new());
+    }
+    // Forward step: every other candidate added to the best single effect, both fitted
+    // jointly from their single fits (one coarse pass); the best few pairs are refined.
+    let first = best.fitted[0].0.clone();
+    let first_values = flat_values(&best);
+    let forward: Vec<Evaluation> = evaluated[1..]
+        .par_iter()
+        .filter(|e| {
+            let c = &e.fitted[0].0;
+            !matches!((&first, c), (Component::Generic(ka, x), Component::Generic(kb, y)) if ka == kb && x == y)
+        })
+        .filter_map(|e| {
+            let mut start = first_values.clone();
+            start.extend(flat_values(e));
+            problem.fit(&[first.clone(), e.fitted[0].0.clone()], Some(&start))
+        })
+        .collect();
+    let mut forward = forward;
+    forward.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let pairs: Vec<(Vec<Component>, Vec<f64>)> = forward
+        .iter()
+        .take(PAIR_POOL)
+        .map(|e| {
+            (
+                e.fitted.iter().map(|(c, _)| c.clone()).collect(),
+                flat_values(e),
+            )
+        })
+        .collect();
+    let mut fitted_pairs: Vec<Evaluation> = pairs
+        .par_iter()
+        .filter_map(|(c, s)| problem.fit(c, Some(s)))
+        .collect();
+    fitted_pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
+    if let Some(pair) = fitted_pairs.first()
+        && explains(pair)
+        && pair.score >= best.score + MIN_SCORE
+        && pair.shrink >= best.shrink + 0.1
+    {
+        return (pair.effect.clone(), evaluated, fitted_pairs);
+    }
+    if explains(&best) {
+        return (best.effect, evaluated, fitted_pairs);
+    }
+    ("unknown".into(), evaluated, fitted_pairs)
+}
+
+fn overlays(problem: &Problem, report: &WhereReport, chosen: Option<&Evaluation>) -> Vec<Overlay> {
+    let n = problem.data.len();
+    let (a, b) = (n / BLOCKS, 2 * n / BLOCKS);
+    let corrected = chosen.and_then(|e| problem.predict(&e.fitted).ok());
+    let located = report.location.channel.trim_start_matches("y:");
+    problem
+        .outputs
+        .iter()
+        .enumerate()
+        .filter(|(_, name)| name.as_str() == located || problem.outputs.len() <= 3)
+        .map(|(c, name)| {
+            let step = ((b - a) / 1500).max(1);
+            let idx: Vec<usize> = (a..b).step_by(step).collect();
+            Overlay {
+                channel: format!("y:{name}"),
+                t: idx.iter().map(|&k| problem.data.t[k]).collect(),
+                measured: idx.iter().map(|&k| problem.measured[c][k]).collect(),
+                nominal: idx.iter().map(|&k| problem.nominal.outputs[c][k]).collect(),
+                corrected: corrected
+                    .as_ref()
+                    .map(|s| idx.iter().map(|&k| s.outputs[c][k]).collect())
+                    .unwrap_or_default(),
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,729 @@
+//! Candidate effects: the generic sensor catalogue, the replay with candidates added,
+//! parameter fitting on the training blocks and held-out scoring.
+//!
+//! A candidate is one or two [`Component`]s: a plant effect (switched on in the plant's
+//! replay, its parameters fitted) or a generic sensor effect on one measured channel
+//! (applied to the replayed output, so it costs no new replay). Fitting minimises the
+//! noise-weighted squared residual on the training blocks by a bounded coordinate search
+//! (a grid over the whole range, then golden-section refinement in the best bracket), which
+//! copes with the non-smooth effects (quantisation, dead zone, saturation) where a gradient
+//! method would stall. Scores are held-out Gaussian log-likelihoods (per-channel variance
+//! from the training residuals) minus `k/2 ln n_train` (BIC-like).
+
+use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Simulation};
+use serde::Serialize;
+
+/// The generic, plant-independent sensor effects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum GenericKind {
+    /// `y = y_model + b`.
+    SensorBias,
+    /// `y = (1 + s) y_model`.
+    SensorScale,
+    /// `y = q round(y_model / q)`.
+    Quantisation,
+    /// `y(t) = y_model(t - d)`.
+    MeasurementDelay,
+    /// `y = clamp(y_model, -L, L)`.
+    OutputSaturation,
+    /// `y = sign(y_model) max(|y_model| - d, 0)`.
+    DeadZone,
+    /// First-order sensor lag with time constant `tau`.
+    FirstOrderLag,
+}
+
+impl GenericKind {
+    /// Every generic effect.
+    pub const ALL: [GenericKind; 7] = [
+        GenericKind::SensorBias,
+        GenericKind::SensorScale,
+        GenericKind::Quantisation,
+        GenericKind::MeasurementDelay,
+        GenericKind::OutputSaturation,
+        GenericKind::DeadZone,
+        GenericKind::FirstOrderLag,
+    ];
+
+    /// Name used in verdicts (followed by `:<channel>`).
+    pub fn name(self) -> &'static str {
+        match self {
+            GenericKind::SensorBias => "sensor_bias",
+            GenericKind::SensorScale => "sensor_scale",
+            GenericKind::Quantisation => "quantisation",
+            GenericKind::MeasurementDelay => "measurement_delay",
+            GenericKind::OutputSaturation => "output_saturation",
+            GenericKind::DeadZone => "dead_zone",
+            GenericKind::FirstOrderLag => "first_order_lag",
+        }
+    }
+
+    /// The kind called `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.iter().copied().find(|k| k.name() == name)
+    }
+
+    /// Parameter name in the ranking.
+    pub fn param_name(self) -> &'static str {
+        match self {
+            GenericKind::SensorBias => "bias",
+            GenericKind::SensorScale => "scale_error",
+            GenericKind::Quantisation => "step",
+            GenericKind::MeasurementDelay => "delay_s",
+            GenericKind::OutputSaturation => "limit",
+            GenericKind::DeadZone => "width",
+            GenericKind::FirstOrderLag => "tau_s",
+        }
+    }
+
+    /// Search range for a channel whose replayed output reaches `amplitude` (max |y|),
+    /// whose measurements span `span` and whose noise is `sigma`.
+    pub fn range(self, amplitude: f64, span: f64, sigma: f64, dt: f64) -> (f64, f64, Scale) {
+        let a = amplitude.max(sigma);
+        match self {
+            GenericKind::SensorBias => {
+                let b = (0.5 * span).max(10.0 * sigma);
+                (-b, b, Scale::Linear)
+            }
+            GenericKind::SensorScale => (-0.5, 0.5, Scale::Linear),
+            GenericKind::Quantisation => (0.05 * sigma, (0.25 * span).max(sigma), Scale::Log),
+            GenericKind::MeasurementDelay => (0.0, 25.0 * dt, Scale::Linear),
+            GenericKind::OutputSaturation => (0.05 * a, a, Scale::Linear),
+            GenericKind::DeadZone => (1e-4 * a, 0.5 * a, Scale::Log),
+            GenericKind::FirstOrderLag => (0.1 * dt, 200.0 * dt, Scale::Log),
+        }
+    }
+
+    /// Applies the effect with parameter `p` to a replayed output sampled every `dt`.
+    pub fn apply(self, p: f64, y: &[f64], dt: f64) -> Vec<f64> {
+        match self {
+            GenericKind::SensorBias => y.iter().map(|v| v + p).collect(),
+            GenericKind::SensorScale => y.iter().map(|v| v * (1.0 + p)).collect(),
+            GenericKind::Quantisation => {
+                let q = p.max(1e-300);
+                y.iter().map(|v| q * (v / q).round()).collect()
+            }
+            GenericKind::MeasurementDelay => {
+                let shift = (p / dt).max(0.0);
+                let whole = shift.floor() as usize;
+                let frac = shift - shift.floor();
+                (0..y.len())
+                    .map(|k| {
+                        let a = y[k.saturating_sub(whole)];
+                        let b = y[k.saturating_sub(whole + 1)];
+                        (1.0 - frac) * a + frac * b
+                    })
+                    .collect()
+            }
+            GenericKind::OutputSaturation => y.iter().map(|v| v.clamp(-p, p)).collect(),
+            GenericKind::DeadZone => y
+                .iter()
+                .map(|v| v.signum() * (v.abs() - p).max(0.0))
+                .collect(),
+            GenericKind::FirstOrderLag => {
+                let alpha = 1.0 - (-dt / p.max(1e-12)).exp();
+                let mut out = Vec::with_capacity(y.len());
+                let mut state = y.first().copied().unwrap_or(0.0);
+                for &v in y {
+                    state += alpha * (v - state);
+                    out.push(state);
+                }
+                out
+            }
+        }
+    }
+}
+
+/// One part of a candidate.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Component {
+    /// The plant effect with this index in the problem's plant catalogue.
+    Plant(usize),
+    /// A generic effect on the output channel with this index.
+    Generic(GenericKind, usize),
+}
+
+/// A parameter being fitted: which component, its name and range.
+#[derive(Clone, Debug, PartialEq)]
+struct Dim {
+    component: usize,
+    name: String,
+    lo: f64,
+    hi: f64,
+    scale: Scale,
+}
+
+/// Everything the candidates are fitted and scored against.
+pub struct Problem<'a> {
+    /// The plant.
+    pub plant: &'a dyn GapPlant,
+    /// The data.
+    pub data: &'a PlantData,
+    /// Model parameters: defaults overridden by `[model]`.
+    pub base: Params,
+    /// Effects the user's model includes.
+    pub sim_effects: Vec<String>,
+    /// Candidate plant effects (the plant catalogue less `sim_effects` and effects whose
+    /// inputs are absent).
+    pub plant_effects: Vec<EffectSpec>,
+    /// Output channel names.
+    pub outputs: Vec<String>,
+    /// Measured values per output channel.
+    pub measured: Vec<Vec<f64>>,
+    /// Noise std per channel.
+    pub sigma: Vec<f64>,
+    /// Effective degrees of freedom of each sigma (infinite when declared in meta).
+    pub sigma_dof: Vec<f64>,
+    /// Training samples.
+    pub train: Vec<bool>,
+    /// Held-out samples.
+    pub test: Vec<bool>,
+    /// The replay of the user's model, initial condition refitted (see [`Problem::predict`]).
+    pub nominal: Simulation,
+    /// The replay of the user's model from the measured initial condition.
+    pub nominal_raw: Simulation,
+    /// Sensitivity of the replay to the initial value of each output channel that the
+    /// plant initialises from the data: `(channel, d outputs / d initial value, step)`.
+    pub init_sensitivity: Vec<(usize, Vec<Vec<f64>>, f64)>,
+}
+
+/// Solves the small symmetric system `a x = b` by Gaussian elimination with partial
+/// pivoting; `None` when singular.
+fn solve_small(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let n = b.len();
+    for col in 0..n {
+        let piv = (col..n).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if a[piv][col].abs() < 1e-300 {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        for row in col + 1..n {
+            let f = a[row][col] / a[col][col];
+            let pivot_row = a[col].clone();
+            for (v, p) in a[row].iter_mut().zip(&pivot_row).skip(col) {
+                *v -= f * p;
+            }
+            b[row] -= f * b[col];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for row in (0..n).rev() {
+        let s: f64 = (row + 1..n).map(|k| a[row][k] * x[k]).sum();
+        x[row] = (b[row] - s) / a[row][row];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// A fitted and scored candidate.
+#[derive(Clone, Debug, Serialize)]
+pub struct Evaluation {
+    /// Effect name (`a+b` for a pair; generic effects as `kind:channel`).
+    pub effect: String,
+    /// Component names.
+    pub components: Vec<String>,
+    /// Fitted parameters by name.
+    pub params: Vec<(String, f64)>,
+    /// Held-out log-likelihood minus the parameter penalty, relative to the user's model
+    /// (nats; positive = better than the model).
+    pub score: f64,
+    /// Held-out gap of the user's model (see [`Problem::gap`]).
+    pub gap_before: f64,
+    /// Held-out gap with the fitted effect added.
+    pub gap_after: f64,
+    /// `1 - gap_after / gap_before`.
+    pub shrink: f64,
+    /// RMS error of the replayed states against the truth columns (held-out), before.
+    pub truth_error_before: Option<f64>,
+    /// The same with the fitted effect.
+    pub truth_error_after: Option<f64>,
+    /// Training cost at the fit (sum of squared standardised residuals).
+    #[serde(skip)]
+    pub train_cost: f64,
+    /// Raw held-out log-likelihood minus penalty (for pair comparisons).
+    #[serde(skip)]
+    pub absolute_score: f64,
+    /// The components and fitted values, to replay the candidate.
+    #[serde(skip)]
+    pub fitted: Vec<(Component, Vec<f64>)>,
+}
+
+impl<'a> Problem<'a> {
+    /// Name of a component.
+    pub fn component_name(&self, c: &Component) -> String {
+        match c {
+            Component::Plant(i) => self.plant_effects[*i].name.to_string(),
+            Component::Generic(kind, ch) => format!("{}:{}", kind.name(), self.outputs[*ch]),
+        }
+    }
+
+    /// Every single-component candidate.
+    pub fn single_candidates(&self) -> Vec<Component> {
+        let mut out: Vec<Component> = (0..self.plant_effects.len())
+            .map(Component::Plant)
+            .collect();
+        for ch in 0..self.outputs.len() {
+            for kind in GenericKind::ALL {
+                out.push(Component::Generic(kind, ch));
+            }
+        }
+        out
+    }
+
+    fn dims(&self, components: &[Component]) -> Vec<Dim> {
+        let mut dims = Vec::new();
+        for (ci, c) in components.iter().enumerate() {
+            match c {
+                Component::Plant(i) => {
+                    for r in &self.plant_effects[*i].fit {
+                        dims.push(Dim {
+                            component: ci,
+                            name: r.name.to_string(),
+                            lo: r.lo,
+                            hi: r.hi,
+                            scale: r.scale,
+                        });
+                    }
+                }
+                Component::Generic(kind, ch) => {
+                    let amplitude = self.nominal.outputs[*ch]
+                        .iter()
+                        .fold(0.0f64, |m, v| m.max(v.abs()));
+                    let finite = self.measured[*ch].iter().filter(|v| v.is_finite());
+                    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                        (a.min(v), b.max(v))
+                    });
+                    let span = (hi - lo).max(0.0);
+                    let (lo, hi, scale) = match (kind, lattice_step(&self.measured[*ch])) {
+                        (GenericKind::Quantisation, Some(q)) => (0.98 * q, 1.02 * q, Scale::Linear),
+                        _ => kind.range(amplitude, span, self.sigma[*ch], self.data.dt),
+                    };
+                    dims.push(Dim {
+                        component: ci,
+                        name: kind.param_name().to_string(),
+                        lo,
+                        hi,
+                        scale,
+                    });
+                }
+            }
+        }
+        dims
+    }
+
+    /// Applies the generic components of `fitted` to a replay.
+    fn apply_generic(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
+        let mut out = sim.clone();
+        for (c, values) in fitted {
+            if let (Component::Generic(kind, ch), Some(&p)) = (c, values.first()) {
+                let y = &mut out.outputs[*ch];
+                *y = kind.apply(p, y, self.data.dt);
+            }
+        }
+        out
+    }
+
+    /// The replay from the measured initial condition, then the generic components, with
+    /// the initial condition refitted on the training samples (one Gauss-Newton step on the
+    /// linear sensitivity): the first measurement carries noise and, under a sensor effect
+    /// (bias, scale, saturation, ...), the effect itself, which a slow plant would carry
+    /// through the whole record.
+    fn with_refitted_start(&self, raw: Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
+        let base = self.apply_generic(&raw, fitted);
+        if self.init_sensitivity.is_empty() {
+            return base;
+        }
+        let shifted = |deltas: &[f64]| -> Simulation {
+            let mut s = raw.clone();
+            for ((_, sens, _), d) in self.init_sensitivity.iter().zip(deltas) {
+                for (out, sj) in s.outputs.iter_mut().zip(sens) {
+                    for (v, g) in out.iter_mut().zip(sj) {
+                        *v += d * g;
+                    }
+                }
+            }
+            self.apply_generic(&s, fitted)
+        };
+        let m = self.init_sensitivity.len();
+        let jac: Vec<Simulation> = (0..m)
+            .map(|i| {
+                let mut d = vec![0.0; m];
+                d[i] = self.init_sensitivity[i].2;
+                shifted(&d)
+            })
+            .collect();
+        let mut a = vec![vec![0.0; m]; m];
+        let mut b = vec![0.0; m];
+        for (j, y) in self.measured.iter().enumerate() {
+            let w = 1.0 / (self.sigma[j] * self.sigma[j]);
+            for (k, &yk) in y.iter().enumerate() {
+                if !(self.train[k] && yk.is_finite()) {
+                    continue;
+                }
+                let r = yk - base.outputs[j][k];
+                let g: Vec<f64> = (0..m)
+                    .map(|i| {
+                        (jac[i].outputs[j][k] - base.outputs[j][k]) / self.init_sensitivity[i].2
+                    })
+                    .collect();
+                for p in 0..m {
+                    b[p] += w * g[p] * r;
+                    for q in 0..m {
+                        a[p][q] += w * g[p] * g[q];
+                    }
+                }
+            }
+        }
+        match solve_small(a, b) {
+            Some(delta) if delta.iter().all(|d| d.is_finite()) => shifted(&delta),
+            _ => base,
+        }
+    }
+
+    /// Replays the model with the candidate's components at `values` (one vector per
+    /// component, in `dims` order).
+    pub fn predict(&self, fitted: &[(Component, Vec<f64>)]) -> Result<Simulation, String> {
+        let plant_parts: Vec<&(Component, Vec<f64>)> = fitted
+            .iter()
+            .filter(|(c, _)| matches!(c, Component::Plant(_)))
+            .collect();
+        let raw = if plant_parts.is_empty() {
+            self.nominal_raw.clone()
+        } else {
+            let mut params = self.base.clone();
+            let mut active: Vec<&str> = self.sim_effects.iter().map(String::as_str).collect();
+            for (c, values) in &plant_parts {
+                if let Component::Plant(i) = c {
+                    let spec = &self.plant_effects[*i];
+                    active.push(spec.name);
+                    for (r, v) in spec.fit.iter().zip(values) {
+                        params.insert(r.name.to_string(), *v);
+                    }
+                }
+            }
+            self.plant.simulate(&params, &active, self.data)?
+        };
+        Ok(self.with_refitted_start(raw, fitted))
+    }
+
+    /// The user's model with its initial condition refitted (the baseline of every score).
+    pub fn refit_nominal(&mut self) {
+        self.nominal = self.with_refitted_start(self.nominal_raw.clone(), &[]);
+    }
+
+    /// Per-channel (sum of squared residuals, count) over the samples in `mask`.
+    pub fn channel_rss(&self, sim: &Simulation, mask: &[bool]) -> Vec<(f64, usize)> {
+        self.measured
+            .iter()
+            .zip(&sim.outputs)
+            .map(|(y, m)| {
+                let mut rss = 0.0;
+                let mut n = 0;
+                for k in 0..y.len() {
+                    if mask[k] && y[k].is_finite() {
+                        let r = y[k] - m[k];
+                        rss += if r.is_finite() { r * r } else { f64::INFINITY };
+                        n += 1;
+                    }
+                }
+                (rss, n)
+            })
+            .collect()
+    }
+
+    fn train_cost(&self, sim: &Simulation) -> f64 {
+        self.channel_rss(sim, &self.train)
+            .iter()
+            .zip(&self.sigma)
+            .map(|((rss, _), s)| rss / (s * s))
+            .sum()
+    }
+
+    /// Held-out gap: `sqrt(sum_c max(0, MSE_c / sigma_c^2 - 1))`, the residual beyond the
+    /// noise in noise units (0 when the model explains the data to within its noise).
+    pub fn gap(&self, sim: &Simulation) -> f64 {
+        self.channel_rss(sim, &self.test)
+            .iter()
+            .zip(&self.sigma)
+            .map(|((rss, n), s)| (rss / (*n).max(1) as f64 / (s * s) - 1.0).max(0.0))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// Held-out Gaussian log-likelihood with per-channel variance from the training
+    /// residuals, minus `k/2 ln n_train`.
+    pub fn held_out_score(&self, sim: &Simulation, k: usize) -> f64 {
+        let train = self.channel_rss(sim, &self.train);
+        let test = self.channel_rss(sim, &self.test);
+        let mut ll = 0.0;
+        let mut n_train = 0;
+        for (((rss_tr, n_tr), (rss_te, n_te)), s) in train.iter().zip(&test).zip(&self.sigma) {
+            // Floored at half the noise variance: on noise-free (simulated) data a perfect fit
+            // would otherwise make any held-out residual infinitely unlikely.
+            let var = (rss_tr / (*n_tr).max(1) as f64).max(0.5 * s * s);
+            ll -= 0.5 * *n_te as f64 * (std::f64::consts::TAU * var).ln() + 0.5 * rss_te / var;
+            n_train += n_tr;
+        }
+        let score = ll - 0.5 * k as f64 * (n_train.max(2) as f64).ln();
+        if score.is_finite() {
+            score
+        } else {
+            f64::NEG_INFINITY
+        }
+    }
+
+    /// RMS over truth columns (each scaled by its own std over the data) of the replayed
+    /// states' error on the held-out samples; `None` without truth columns in common.
+    pub fn truth_error(&self, sim: &Simulation) -> Option<f64> {
+        let mut acc = 0.0;
+        let mut count = 0usize;
+        for (name, x) in &self.data.truth {
+            let Some(est) = sim.states.get(name) else {
+                continue;
+            };
+            let finite: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+            let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
+            let var =
+                finite.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / finite.len().max(1) as f64;
+            let scale = if var > 0.0 { var.sqrt() } else { 1.0 };
+            for k in 0..x.len() {
+                if self.test[k] && x[k].is_finite() && est[k].is_finite() {
+                    acc += ((x[k] - est[k]) / scale).powi(2);
+                    count += 1;
+                }
+            }
+        }
+        (count > 0).then(|| (acc / count as f64).sqrt())
+    }
+
+    fn cost_at(&self, components: &[Component], dims: &[Dim], theta: &[f64]) -> f64 {
+        let fitted = assemble(components, dims, theta);
+        match self.predict(&fitted) {
+            Ok(sim) => {
+                let c = self.train_cost(&sim);
+                if c.is_finite() { c } else { f64::INFINITY }
+            }
+            Err(_) => f64::INFINITY,
+        }
+    }
+
+    /// Fits `components` (starting from `start` when given, else from the grid) and scores
+    /// them on the held-out blocks.
+    pub fn fit(&self, components: &[Component], start: Option<&[f64]>) -> Option<Evaluation> {
+        self.fit_from(components, start, 0)
+    }
+
+    /// [`Problem::fit`] that keeps the first `frozen` parameters at their start values
+    /// (the forward step of the pair search: the best single effect held, a second added).
+    pub fn fit_from(
+        &self,
+        components: &[Component],
+        start: Option<&[f64]>,
+        frozen: usize,
+    ) -> Option<Evaluation> {
+        let dims = self.dims(components);
+        let mut theta: Vec<f64> = match start {
+            Some(s) if s.len() == dims.len() => s.to_vec(),
+            _ => dims.iter().map(|d| to_value(d, 0.5)).collect(),
+        };
+        // From a start (pairs refined from their singles' fits): one coarser pass.
+        let (passes, grid, golden) = match (dims.len(), start.is_some()) {
+            (_, true) => (1, 7, 10),
+            (1, false) => (1, 13, 16),
+            _ => (2, 13, 16),
+        };
+        let mut best = self.cost_at(components, &dims, &theta);
+        for _ in 0..passes {
+            for i in frozen.min(dims.len())..dims.len() {
+                let (value, cost) = self.line_search(components, &dims, &theta, i, grid, golden);
+                if cost < best {
+                    best = cost;
+                    theta[i] = value;
+                }
+            }
+        }
+        if !best.is_finite() {
+            return None;
+        }
+        let fitted = assemble(components, &dims, &theta);
+        let sim = self.predict(&fitted).ok()?;
+        let before = self.gap(&self.nominal);
+        let after = self.gap(&sim);
+        let nominal_score = self.held_out_score(&self.nominal, 0);
+        let absolute = self.held_out_score(&sim, dims.len());
+        let names: Vec<String> = components.iter().map(|c| self.component_name(c)).collect();
+        Some(Evaluation {
+            effect: names.join("+"),
+            components: names,
+            params: dims
+                .iter()
+                .zip(&theta)
+                .map(|(d, v)| {
+                    let owner = self.component_name(&components[d.component]);
+                    let name = if matches!(components[d.component], Component::Generic(..)) {
+                        format!("{owner}.{}", d.name)
+                    } else {
+                        d.name.clone()
+                    };
+                    (name, *v)
+                })
+                .collect(),
+            score: absolute - nominal_score,
+            gap_before: before,
+            gap_after: after,
+            shrink: if before > 0.0 {
+                1.0 - after / before
+            } else {
+                0.0
+            },
+            truth_error_before: self.truth_error(&self.nominal),
+            truth_error_after: self.truth_error(&sim),
+            train_cost: best,
+            absolute_score: absolute,
+            fitted,
+        })
+    }
+
+    /// Coordinate `i`: a `grid`-point grid over its range, then `golden` golden-section
+    /// steps in the bracket around the best grid point.
+    fn line_search(
+        &self,
+        components: &[Component],
+        dims: &[Dim],
+        theta: &[f64],
+        i: usize,
+        grid: usize,
+        golden: usize,
+    ) -> (f64, f64) {
+        let d = &dims[i];
+        let mut probe = theta.to_vec();
+        let mut eval = |u: f64| {
+            probe[i] = to_value(d, u);
+            self.cost_at(components, dims, &probe)
+        };
+        let costs: Vec<f64> = (0..grid)
+            .map(|g| eval(g as f64 / (grid - 1) as f64))
+            .collect();
+        let (g_best, &c_best) = costs
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .unwrap_or((0, &f64::INFINITY));
+        let step = 1.0 / (grid - 1) as f64;
+        let mut a = (g_best as f64 - 1.0).max(0.0) * step;
+        let mut b = (g_best as f64 + 1.0).min((grid - 1) as f64) * step;
+        let ratio = 0.5 * (5f64.sqrt() - 1.0);
+        let mut x1 = b - ratio * (b - a);
+        let mut x2 = a + ratio * (b - a);
+        let mut f1 = eval(x1);
+        let mut f2 = eval(x2);
+        for _ in 0..golden {
+            if f1 <= f2 {
+                b = x2;
+                x2 = x1;
+                f2 = f1;
+                x1 = b - ratio * (b - a);
+                f1 = eval(x1);
+            } else {
+                a = x1;
+                x1 = x2;
+                f1 = f2;
+                x2 = a + ratio * (b - a);
+                f2 = eval(x2);
+            }
+        }
+        let (u, c) = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
+        if c < c_best {
+            (to_value(d, u), c)
+        } else {
+            (to_value(d, g_best as f64 * step), c_best)
+        }
+    }
+}
+
+/// The step of the lattice a quantised channel's values lie on: the smallest nonzero
+/// difference between consecutive samples, accepted when at least 90 % of the nonzero
+/// differences are integer multiples of it (to 1e-6) and it is not a float rounding step.
+pub fn lattice_step(y: &[f64]) -> Option<f64> {
+    let scale = y
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let diffs: Vec<f64> = y
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| d.is_finite() && *d > 1e-9 * scale.max(1e-300))
+        .collect();
+    if diffs.len() < 20 {
+        return None;
+    }
+    let q = diffs.iter().copied().fold(f64::INFINITY, f64::min);
+    let on_lattice = diffs
+        .iter()
+        .filter(|d| {
+            let r = *d / q;
+            (r - r.round()).abs() < 1e-6 * r.max(1.0)
+        })
+        .count();
+    (on_lattice as f64 >= 0.9 * diffs.len() as f64).then_some(q)
+}
+
+/// Maps `u` in [0, 1] to the parameter's range.
+fn to_value(d: &Dim, u: f64) -> f64 {
+    let u = u.clamp(0.0, 1.0);
+    match d.scale {
+        Scale::Linear => d.lo + u * (d.hi - d.lo),
+        Scale::Log => (d.lo.ln() + u * (d.hi.ln() - d.lo.ln())).exp(),
+    }
+}
+
+fn assemble(components: &[Component], dims: &[Dim], theta: &[f64]) -> Vec<(Component, Vec<f64>)> {
+    components
+        .iter()
+        .enumerate()
+        .map(|(ci, c)| {
+            let values = dims
+                .iter()
+                .zip(theta)
+                .filter(|(d, _)| d.component == ci)
+                .map(|(_, v)| *v)
+                .collect();
+            (c.clone(), values)
+        })
+        .collect()
+}
+
+/// Flattened fitted values of an evaluation, in the order `fit` expects as a start.
+pub fn flat_values(e: &Evaluation) -> Vec<f64> {
+    e.fitted
+        .iter()
+        .flat_map(|(_, v)| v.iter().copied())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn generic_effects_do_what_they_say() {
+        let y = [0.0, 1.0, 2.0, 3.0, -3.0];
+        assert_eq!(GenericKind::SensorBias.apply(0.5, &y, 1.0)[1], 1.5);
+        assert_eq!(GenericKind::SensorScale.apply(0.1, &y, 1.0)[3], 3.0 * 1.1);
+        assert_eq!(
+            GenericKind::Quantisation.apply(2.0, &y, 1.0),
+            vec![0.0, 2.0, 2.0, 4.0, -4.0]
+        );
+        assert_eq!(GenericKind::MeasurementDelay.apply(1.5, &y, 1.0)[3], 1.5);
+        assert_eq!(GenericKind::OutputSaturation.apply(2.5, &y, 1.0)[3], 2.5);
+        assert_eq!(GenericKind::OutputSaturation.apply(2.5, &y, 1.0)[4], -2.5);
+        assert_eq!(
+            GenericKind::DeadZone.apply(1.5, &y, 1.0),
+            vec![0.0, 0.0, 0.5, 1.5, -1.5]
+        );
+        let lag = GenericKind::FirstOrderLag.apply(1.0, &[0.0, 1.0, 1.0], 1.0);
+        assert!((lag[1] - (1.0 - (-1.0f64).exp())).abs() < 1e-12);
+        for k in GenericKind::ALL {
+            assert_eq!(GenericKind::from_name(k.name()), Some(k));
+        }
+    }
+}

@@ -1,0 +1,216 @@
+//! The plant interface of the gap diagnoser: what a user implements to diagnose their own
+//! system.
+//!
+//! A [`GapPlant`] is a nominal model that can be replayed open loop over recorded inputs,
+//! with named parameters (the `[model]` table of the meta file) and its own catalogue of
+//! candidate effects. Each effect is switched on by name and acts through model parameters
+//! (its fitted parameters *are* model parameters, so an effect the user's model already has
+//! is listed in `sim_effects` and takes its values from `[model]`). The generic sensor
+//! catalogue ([`crate::gap::effects::GenericKind`]) is added by the diagnoser to every plant.
+//!
+//! To add a plant: implement the trait (see [`crate::gap::dc_motor`] for a complete worked
+//! example) and add it to [`builtin_plant`].
+
+use std::collections::BTreeMap;
+
+/// How a parameter is searched between its bounds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scale {
+    /// Evenly spaced.
+    Linear,
+    /// Evenly spaced in the logarithm (bounds must be positive).
+    Log,
+}
+
+/// A named model parameter with its default value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamSpec {
+    /// Name as written in `[model]`.
+    pub name: &'static str,
+    /// The project's default value.
+    pub default: f64,
+    /// Unit and meaning.
+    pub doc: &'static str,
+}
+
+/// The search range of one fitted parameter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FitRange {
+    /// Model parameter name.
+    pub name: &'static str,
+    /// Lower bound.
+    pub lo: f64,
+    /// Upper bound.
+    pub hi: f64,
+    /// Search scale.
+    pub scale: Scale,
+}
+
+/// One effect of a plant's own catalogue.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EffectSpec {
+    /// Name used in `sim_effects` and in the verdict.
+    pub name: &'static str,
+    /// What the effect adds to the model.
+    pub doc: &'static str,
+    /// The model parameters fitted when the effect is a candidate.
+    pub fit: Vec<FitRange>,
+    /// Input channels the effect needs (it is not a candidate when one is absent).
+    pub needs_inputs: Vec<&'static str>,
+}
+
+/// Recorded data as the plant sees it: time, inputs by name, measurements by name (NaN =
+/// missing sample), truth by name.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlantData {
+    /// Time stamps (s), strictly increasing.
+    pub t: Vec<f64>,
+    /// Nominal sample time (s) from the meta file.
+    pub dt: f64,
+    /// Input columns `u:<name>` (missing samples hold the previous value).
+    pub inputs: BTreeMap<String, Vec<f64>>,
+    /// Measurement columns `y:<name>`.
+    pub outputs: BTreeMap<String, Vec<f64>>,
+    /// Truth columns `x:<name>` (empty for real data).
+    pub truth: BTreeMap<String, Vec<f64>>,
+    /// Span (s) from the start over which [`PlantData::first_output`] fits a line to pin
+    /// the initial condition below the noise (0: the first sample).
+    pub initial_window: f64,
+    /// Offsets added to [`PlantData::first_output`] (the diagnoser perturbs the initial
+    /// condition with them to measure its effect on the replay).
+    pub initial_offsets: BTreeMap<String, f64>,
+}
+
+impl PlantData {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// An input column, if present.
+    pub fn input(&self, name: &str) -> Option<&[f64]> {
+        self.inputs.get(name).map(Vec::as_slice)
+    }
+
+    /// A measured column, if present.
+    pub fn output(&self, name: &str) -> Option<&[f64]> {
+        self.outputs.get(name).map(Vec::as_slice)
+    }
+
+    /// Initial value of a measured column for the replay: the intercept at `t[0]` of a
+    /// least-squares line through the finite samples of the first `initial_window` seconds
+    /// (so the replay does not start off by one noise sample, which a slow plant would carry
+    /// through the whole record); the first finite sample when the window holds fewer than 3.
+    pub fn first_output(&self, name: &str) -> Option<f64> {
+        let offset = self.initial_offsets.get(name).copied().unwrap_or(0.0);
+        self.fitted_start(name).map(|v| v + offset)
+    }
+
+    fn fitted_start(&self, name: &str) -> Option<f64> {
+        let y = self.output(name)?;
+        let t0 = *self.t.first()?;
+        let pts: Vec<(f64, f64)> = self
+            .t
+            .iter()
+            .zip(y)
+            .take_while(|(t, _)| **t - t0 <= self.initial_window)
+            .filter(|(_, v)| v.is_finite())
+            .map(|(t, v)| (*t - t0, *v))
+            .collect();
+        if pts.len() < 3 {
+            return y.iter().copied().find(|v| v.is_finite());
+        }
+        let m = pts.len() as f64;
+        let (st, sy) = pts.iter().fold((0.0, 0.0), |(a, b), (t, v)| (a + t, b + v));
+        let (mt, my) = (st / m, sy / m);
+        let (sxy, sxx) = pts.iter().fold((0.0, 0.0), |(a, b), (t, v)| {
+            (a + (t - mt) * (v - my), b + (t - mt).powi(2))
+        });
+        let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+        Some(my - slope * mt)
+    }
+}
+
+/// Parameter values by name (defaults overridden by `[model]`, then by fitted values).
+pub type Params = BTreeMap<String, f64>;
+
+/// Looks up a parameter the plant declared (0 if a plant asks for one it did not declare,
+/// which its own tests catch).
+pub fn param(params: &Params, name: &str) -> f64 {
+    params.get(name).copied().unwrap_or(0.0)
+}
+
+/// One open-loop replay.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Simulation {
+    /// Predicted measurement per output channel, in [`GapPlant::outputs`] order.
+    pub outputs: Vec<Vec<f64>>,
+    /// Simulated states by name, compared with `x:<name>` truth columns when present.
+    pub states: BTreeMap<String, Vec<f64>>,
+}
+
+/// A labelled operating regime: the sample indices that belong to it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Regime {
+    /// Label, e.g. `low_speed` or `q4(u:command)`.
+    pub label: String,
+    /// Whether every sample belongs to it (samples may be in several regimes).
+    pub mask: Vec<bool>,
+}
+
+/// A system the gap diagnoser can replay.
+pub trait GapPlant: Sync {
+    /// Name as written in the meta file's `plant`.
+    fn name(&self) -> &'static str;
+    /// Every model parameter with its default.
+    fn parameters(&self) -> Vec<ParamSpec>;
+    /// Input channels the replay needs (`u:<name>`).
+    fn required_inputs(&self) -> Vec<&'static str>;
+    /// Measured channels the model predicts (`y:<name>`), in simulation order.
+    fn outputs(&self) -> Vec<&'static str>;
+    /// The plant's own catalogue of candidate effects.
+    fn effects(&self) -> Vec<EffectSpec>;
+    /// Replays the inputs open loop with `active` effects on (names from
+    /// [`GapPlant::effects`]), starting from the first measurements.
+    fn simulate(
+        &self,
+        params: &Params,
+        active: &[&str],
+        data: &PlantData,
+    ) -> Result<Simulation, String>;
+    /// Plant-specific operating regimes (the diagnoser adds generic quantile bins).
+    fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime>;
+
+    /// Span (s) over which the initial condition is fitted from the first samples (see
+    /// [`PlantData::first_output`]); 0 for plants whose initial error dies out in a few
+    /// samples.
+    fn initial_window(&self) -> f64 {
+        0.0
+    }
+
+    /// Default parameter values as a map.
+    fn default_params(&self) -> Params {
+        self.parameters()
+            .iter()
+            .map(|p| (p.name.to_string(), p.default))
+            .collect()
+    }
+}
+
+/// The built-in plant called `name`.
+pub fn builtin_plant(name: &str) -> Option<Box<dyn GapPlant>> {
+    match name {
+        "reaction_wheel" => Some(Box::new(crate::gap::wheel::WheelGapPlant)),
+        "dc_motor" => Some(Box::new(crate::gap::dc_motor::DcMotorPlant)),
+        "valve" => Some(Box::new(crate::gap::valve::ValveGapPlant)),
+        _ => None,
+    }
+}
+
+/// Names of the built-in plants (for error messages).
+pub const BUILTIN_PLANTS: &[&str] = &["reaction_wheel", "valve", "dc_motor"];

@@ -1,0 +1,239 @@
+//! Statistics the gap diagnoser needs: tail probabilities of the normal and chi-square
+//! distributions, Holm's step-down correction, Ljung-Box whiteness, a robust noise estimate
+//! and the periodogram.
+
+use rustfft::FftPlanner;
+use rustfft::num_complex::Complex;
+
+/// Upper tail `P(Z > z)` of the standard normal (erfc via libm).
+pub fn normal_sf(z: f64) -> f64 {
+    0.5 * libm::erfc(z / std::f64::consts::SQRT_2)
+}
+
+/// Regularised upper incomplete gamma `Q(a, x)` (Numerical Recipes: series below `a + 1`,
+/// Lentz continued fraction above).
+pub fn gamma_q(a: f64, x: f64) -> f64 {
+    if a.is_nan() || a <= 0.0 || !x.is_finite() {
+        return if x.is_infinite() && x > 0.0 { 0.0 } else { 1.0 };
+    }
+    if x <= 0.0 {
+        return 1.0;
+    }
+    let ln_front = -x + a * x.ln() - libm::lgamma(a);
+    if x < a + 1.0 {
+        let (mut sum, mut term, mut ap) = (1.0 / a, 1.0 / a, a);
+        for _ in 0..10_000 {
+            ap += 1.0;
+            term *= x / ap;
+            sum += term;
+            if term.abs() < sum.abs() * 1e-15 {
+                break;
+            }
+        }
+        (1.0 - sum * ln_front.exp()).clamp(0.0, 1.0)
+    } else {
+        let tiny = 1e-300;
+        let mut b = x + 1.0 - a;
+        let mut c = 1.0 / tiny;
+        let mut d = 1.0 / b;
+        let mut h = d;
+        for i in 1..10_000 {
+            let an = -(i as f64) * (i as f64 - a);
+            b += 2.0;
+            d = an * d + b;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = b + an / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            let delta = d * c;
+            h *= delta;
+            if (delta - 1.0).abs() < 1e-15 {
+                break;
+            }
+        }
+        (ln_front.exp() * h).clamp(0.0, 1.0)
+    }
+}
+
+/// Upper tail of the chi-square distribution with `dof` degrees of freedom.
+pub fn chi2_sf(x: f64, dof: f64) -> f64 {
+    gamma_q(0.5 * dof, 0.5 * x)
+}
+
+/// Upper-tail p-value that a mean of squared standardised residuals `ratio` (expected 1)
+/// is larger than noise explains, when it is the mean of `n` terms and the noise variance
+/// itself was estimated with `reference_dof` effective degrees of freedom (infinite when
+/// declared). Normal approximation of the log of an F ratio: `var ln F = 2/n + 2/m`.
+pub fn variance_ratio_p(ratio: f64, n: f64, reference_dof: f64) -> f64 {
+    if ratio.is_nan() || ratio <= 0.0 || n < 1.0 {
+        return 1.0;
+    }
+    let var = 2.0 / n
+        + if reference_dof.is_finite() {
+            2.0 / reference_dof
+        } else {
+            0.0
+        };
+    normal_sf(ratio.ln() / var.sqrt())
+}
+
+/// Holm's step-down adjusted p-values (same order as `p`): controls the family-wise error
+/// rate over all tests without assuming independence.
+pub fn holm(p: &[f64]) -> Vec<f64> {
+    let m = p.len();
+    let mut order: Vec<usize> = (0..m).collect();
+    order.sort_by(|&a, &b| p[a].total_cmp(&p[b]));
+    let mut adjusted = vec![1.0; m];
+    let mut running: f64 = 0.0;
+    for (rank, &i) in order.iter().enumerate() {
+        let v = ((m - rank) as f64 * p[i]).min(1.0);
+        running = running.max(v);
+        adjusted[i] = running;
+    }
+    adjusted
+}
+
+/// Sample autocorrelation of `x` (finite entries, mean removed) at lags `1..=max_lag`.
+pub fn autocorrelation(x: &[f64], max_lag: usize) -> Vec<f64> {
+    let n = x.len();
+    let mean = x.iter().sum::<f64>() / n.max(1) as f64;
+    let c0: f64 = x.iter().map(|v| (v - mean) * (v - mean)).sum();
+    (1..=max_lag)
+        .map(|k| {
+            if k >= n || c0 <= 0.0 {
+                return 0.0;
+            }
+            let ck: f64 = (0..n - k).map(|i| (x[i] - mean) * (x[i + k] - mean)).sum();
+            ck / c0
+        })
+        .collect()
+}
+
+/// Ljung-Box statistic over lags `1..=h` and its chi-square(h) p-value.
+pub fn ljung_box(x: &[f64], h: usize) -> (f64, f64) {
+    let n = x.len() as f64;
+    let rho = autocorrelation(x, h);
+    let q = n
+        * (n + 2.0)
+        * rho
+            .iter()
+            .enumerate()
+            .map(|(k, r)| r * r / (n - (k + 1) as f64))
+            .sum::<f64>();
+    (q, chi2_sf(q, h as f64))
+}
+
+/// Median of a copy of `values` (finite ones); `None` when there are none.
+pub fn median(values: &[f64]) -> Option<f64> {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    Some(if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    })
+}
+
+/// Sensor-noise std estimated from the data alone: the MAD of second differences
+/// (`var(y[k+1] - 2 y[k] + y[k-1]) = 6 sigma^2` for white noise; the signal's own
+/// curvature is negligible at the sample rate, and the median ignores transients). Falls
+/// back to the plain std of the differences when more than half are zero (quantised data).
+/// Returns the estimate and its effective degrees of freedom (the MAD's efficiency is 37 %).
+pub fn noise_std_from_differences(y: &[f64]) -> Option<(f64, f64)> {
+    let d2: Vec<f64> = y
+        .windows(3)
+        .filter(|w| w.iter().all(|v| v.is_finite()))
+        .map(|w| w[2] - 2.0 * w[1] + w[0])
+        .collect();
+    if d2.len() < 10 {
+        return None;
+    }
+    let abs: Vec<f64> = d2.iter().map(|v| v.abs()).collect();
+    let mad = median(&abs)?;
+    let sigma = if mad > 0.0 {
+        1.4826 * mad / 6f64.sqrt()
+    } else {
+        (d2.iter().map(|v| v * v).sum::<f64>() / d2.len() as f64 / 6.0).sqrt()
+    };
+    (sigma > 0.0).then_some((sigma, 0.37 * d2.len() as f64))
+}
+
+/// Periodogram of `x` (mean removed) normalised so that white noise of unit variance has
+/// expected value 1 in every bin: `|X_k|^2 / n` for `k = 1..n/2`, with frequencies
+/// `k / (n dt)` (Hz).
+pub fn periodogram(x: &[f64], dt: f64) -> (Vec<f64>, Vec<f64>) {
+    let n = x.len();
+    if n < 4 {
+        return (Vec::new(), Vec::new());
+    }
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let mut buf: Vec<Complex<f64>> = x.iter().map(|v| Complex::new(v - mean, 0.0)).collect();
+    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
+    let half = n / 2;
+    let freqs = (1..=half).map(|k| k as f64 / (n as f64 * dt)).collect();
+    let power = buf[1..=half]
+        .iter()
+        .map(|c| c.norm_sqr() / n as f64)
+        .collect();
+    (freqs, power)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prognos_core::random::standard_normal;
+    use rand_core::SeedableRng;
+
+    #[test]
+    fn chi_square_tail_matches_tables() {
+        // chi2(10) 95th percentile 18.307; chi2(1) at 3.841 -> 0.05; chi2(100) at 124.342.
+        assert!((chi2_sf(18.307, 10.0) - 0.05).abs() < 1e-4);
+        assert!((chi2_sf(3.841, 1.0) - 0.05).abs() < 1e-4);
+        assert!((chi2_sf(124.342, 100.0) - 0.05).abs() < 1e-4);
+        assert!((normal_sf(1.959_964) - 0.025).abs() < 1e-6);
+    }
+
+    #[test]
+    fn holm_adjusts_step_down() {
+        let adj = holm(&[0.01, 0.04, 0.03, 0.5]);
+        assert_eq!(adj, vec![0.04, 0.09, 0.09, 0.5]);
+    }
+
+    #[test]
+    fn white_noise_passes_and_noise_std_is_recovered() {
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(3);
+        let x: Vec<f64> = (0..5000)
+            .map(|k| 0.2 * standard_normal::<f64, _>(&mut rng) + (k as f64 * 1e-3).sin())
+            .collect();
+        let (sigma, dof) = noise_std_from_differences(&x).unwrap();
+        assert!((sigma - 0.2).abs() < 0.01, "{sigma}");
+        assert!(dof > 1000.0);
+        let white: Vec<f64> = (0..5000).map(|_| standard_normal(&mut rng)).collect();
+        let (_, p) = ljung_box(&white, 20);
+        assert!(p > 0.01, "{p}");
+        let mut ar = vec![0.0f64; 5000];
+        for k in 1..5000 {
+            ar[k] = 0.3 * ar[k - 1] + white[k];
+        }
+        assert!(ljung_box(&ar, 20).1 < 1e-10);
+    }
+
+    #[test]
+    fn periodogram_of_unit_white_noise_averages_one() {
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(4);
+        let x: Vec<f64> = (0..4096).map(|_| standard_normal(&mut rng)).collect();
+        let (f, p) = periodogram(&x, 0.05);
+        assert_eq!(f.len(), 2048);
+        assert!((f[2047] - 10.0).abs() < 1e-9);
+        let mean = p.iter().sum::<f64>() / p.len() as f64;
+        assert!((mean - 1.0).abs() < 0.06, "{mean}");
+    }
+}

@@ -1,0 +1,262 @@
+//! The pneumatic valve as a gap plant (Daigle & Goebel 2011, the core's `plants::valve`
+//! with progpy's constants).
+//!
+//! Inputs (progpy's trace format): `u:pl`, `u:pr` (Pa), `u:top_port_supply`,
+//! `u:bottom_port_supply` (1 = port at supply, 0 = vented); a row's input is the one
+//! applied during the step that ends at that row. Outputs: `y:x` (m), `y:pt`, `y:pb` (Pa),
+//! `y:q` (m^3/s); the discrete `y:open`/`y:closed` are not replayed. The damage variables
+//! are model parameters (`friction`, `spring`, the three leak areas), so the catalogue's
+//! effects are departures of those from the user's values: `friction_increase`,
+//! `spring_weakening`, `internal_leak`, `top_external_leak`, `bottom_external_leak`, and
+//! `seal_contact` (flexible seals of stiffness `seal_stiffness` instead of hard stops).
+//! `choked_flow` is not a candidate: the core's orifice equation always chokes, and a model
+//! without choking to start from does not exist in this project.
+
+use crate::gap::plant::{
+    EffectSpec, FitRange, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
+};
+use nalgebra::SVector;
+use prognos_core::plants::valve::{Contact, Integrator, NU, NX, ValveParams, idx};
+use std::collections::BTreeMap;
+
+/// The valve gap plant.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ValveGapPlant;
+
+/// Parameters with defaults (progpy's `PneumaticValveBase`, undamaged).
+pub const VALVE_PARAMETERS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "friction",
+        default: 6000.0,
+        doc: "friction coefficient r (N s/m), friction_increase",
+    },
+    ParamSpec {
+        name: "spring",
+        default: 48000.0,
+        doc: "spring constant k (N/m), spring_weakening",
+    },
+    ParamSpec {
+        name: "internal_leak_area",
+        default: 0.0,
+        doc: "A_i (m^2), internal_leak",
+    },
+    ParamSpec {
+        name: "top_leak_area",
+        default: 0.0,
+        doc: "A_et (m^2), top_external_leak",
+    },
+    ParamSpec {
+        name: "bottom_leak_area",
+        default: 0.0,
+        doc: "A_eb (m^2), bottom_external_leak",
+    },
+    ParamSpec {
+        name: "seal_stiffness",
+        default: 1.0e9,
+        doc: "k_c (N/m) of the flexible seals, seal_contact",
+    },
+    ParamSpec {
+        name: "supply_pressure",
+        default: 5.272_420_892_278_395e6,
+        doc: "p_s (Pa)",
+    },
+    ParamSpec {
+        name: "progpy_euler",
+        default: 0.0,
+        doc: "1: progpy's explicit Euler; 0: the semi-implicit scheme",
+    },
+];
+
+/// The valve's own catalogue.
+pub fn valve_effects() -> Vec<EffectSpec> {
+    let one = |name: &'static str, doc: &'static str, p: &'static str, lo, hi| EffectSpec {
+        name,
+        doc,
+        fit: vec![FitRange {
+            name: p,
+            lo,
+            hi,
+            scale: Scale::Log,
+        }],
+        needs_inputs: Vec::new(),
+    };
+    vec![
+        one(
+            "friction_increase",
+            "friction coefficient r departs from the model's",
+            "friction",
+            1.0e3,
+            1.0e5,
+        ),
+        one(
+            "spring_weakening",
+            "spring constant k departs from the model's",
+            "spring",
+            1.0e3,
+            1.0e5,
+        ),
+        one(
+            "internal_leak",
+            "leak across the piston, area A_i",
+            "internal_leak_area",
+            1e-10,
+            1e-4,
+        ),
+        one(
+            "top_external_leak",
+            "leak from the top chamber, area A_et",
+            "top_leak_area",
+            1e-10,
+            1e-4,
+        ),
+        one(
+            "bottom_external_leak",
+            "leak from the bottom chamber, area A_eb",
+            "bottom_leak_area",
+            1e-10,
+            1e-4,
+        ),
+        one(
+            "seal_contact",
+            "flexible end seals of stiffness k_c instead of hard stops",
+            "seal_stiffness",
+            1e6,
+            1e11,
+        ),
+    ]
+}
+
+impl GapPlant for ValveGapPlant {
+    fn name(&self) -> &'static str {
+        "valve"
+    }
+
+    fn parameters(&self) -> Vec<ParamSpec> {
+        VALVE_PARAMETERS.to_vec()
+    }
+
+    fn required_inputs(&self) -> Vec<&'static str> {
+        vec!["pl", "pr", "top_port_supply", "bottom_port_supply"]
+    }
+
+    fn outputs(&self) -> Vec<&'static str> {
+        vec!["x", "pt", "pb", "q"]
+    }
+
+    fn effects(&self) -> Vec<EffectSpec> {
+        valve_effects()
+    }
+
+    fn simulate(
+        &self,
+        params: &Params,
+        active: &[&str],
+        data: &PlantData,
+    ) -> Result<Simulation, String> {
+        let g = |n: &str| param(params, n);
+        let mut vp = ValveParams::<f64>::progpy();
+        vp.p_supply = g("supply_pressure");
+        vp.integrator = if g("progpy_euler") >= 0.5 {
+            Integrator::ProgpyEuler
+        } else {
+            Integrator::SemiImplicit
+        };
+        if active.contains(&"seal_contact") {
+            vp.contact = Contact::Seal {
+                k_c: g("seal_stiffness"),
+            };
+        }
+        let input = |name: &str| data.input(name).ok_or(format!("missing u:{name}"));
+        let (pl, pr, top, bottom) = (
+            input("pl")?,
+            input("pr")?,
+            input("top_port_supply")?,
+            input("bottom_port_supply")?,
+        );
+        let u_at = |k: usize| -> SVector<f64, NU> {
+            let port = |on: f64| if on >= 0.5 { vp.p_supply } else { vp.p_atm };
+            SVector::from([pl[k], pr[k], port(top[k]), port(bottom[k])])
+        };
+        let x0 = data.first_output("x").unwrap_or(0.0).clamp(0.0, vp.l_s);
+        let pt0 = data.first_output("pt").unwrap_or(vp.p_supply);
+        let pb0 = data.first_output("pb").unwrap_or(vp.p_atm);
+        let mut s = SVector::<f64, NX>::zeros();
+        s[idx::X] = x0;
+        s[idx::M_TOP] = vp.mass_top_for(x0, pt0);
+        s[idx::M_BOT] = vp.mass_bottom_for(x0, pb0);
+        s[idx::R] = g("friction");
+        s[idx::K] = g("spring");
+        s[idx::A_I] = g("internal_leak_area");
+        s[idx::A_ET] = g("top_leak_area");
+        s[idx::A_EB] = g("bottom_leak_area");
+        let n = data.len();
+        let mut out: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(n)).collect();
+        let mut velocity = Vec::with_capacity(n);
+        for k in 0..n {
+            let o = vp.outputs(&s, &u_at(k));
+            for (c, v) in out.iter_mut().zip(o) {
+                c.push(v);
+            }
+            velocity.push(s[idx::V]);
+            if k + 1 == n {
+                break;
+            }
+            s = vp.advance(&s, &u_at(k + 1), data.t[k + 1] - data.t[k]);
+            if !s.iter().all(|v| v.is_finite()) {
+                return Err(format!("replay diverged at t = {}", data.t[k]));
+            }
+        }
+        let mut states = BTreeMap::new();
+        states.insert("x".to_string(), out[0].clone());
+        states.insert("v".to_string(), velocity);
+        Ok(Simulation {
+            outputs: out,
+            states,
+        })
+    }
+
+    fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {
+        let n = data.len();
+        let x = &nominal.outputs[0];
+        let l_s = 0.0381;
+        let open_cmd = data
+            .input("bottom_port_supply")
+            .map_or(vec![false; n], |b| b.iter().map(|v| *v >= 0.5).collect());
+        let v = nominal
+            .states
+            .get("v")
+            .cloned()
+            .unwrap_or_else(|| vec![0.0; n]);
+        let mask = |f: &dyn Fn(usize) -> bool| (0..n).map(f).collect::<Vec<bool>>();
+        vec![
+            Regime {
+                label: "opening".into(),
+                mask: mask(&|k| open_cmd[k] && x[k] < l_s - 1e-3),
+            },
+            Regime {
+                label: "closing".into(),
+                mask: mask(&|k| !open_cmd[k] && x[k] > 1e-3),
+            },
+            Regime {
+                label: "open".into(),
+                mask: mask(&|k| x[k] >= l_s - 1e-3),
+            },
+            Regime {
+                label: "closed".into(),
+                mask: mask(&|k| x[k] <= 1e-3),
+            },
+            Regime {
+                label: "moving".into(),
+                mask: mask(&|k| v[k].abs() > 1e-4),
+            },
+            Regime {
+                label: "open_command".into(),
+                mask: mask(&|k| open_cmd[k]),
+            },
+            Regime {
+                label: "close_command".into(),
+                mask: mask(&|k| !open_cmd[k]),
+            },
+        ]
+    }
+}

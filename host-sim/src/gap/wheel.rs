@@ -1,0 +1,675 @@
+//! The reaction wheel as a gap plant (Eqs. 1-6 of the wheel paper, with the rotor angle as a
+//! state).
+//!
+//! Nominal model (every catalogue effect off): the current follows the command at once
+//! (`I = G_d (V + f3 + f5)`, with `f3`/`f5` only when those effects are on), and
+//! `J dw/dt = K_t I - c_v w` with the viscous coefficient `viscous_coefficient` at
+//! `reference_temperature`. Inputs: `u:command` (V), optional `u:temperature` (degC, needed
+//! by `viscous_temperature`), optional `u:angle` (rad, the commutation angle; without it the
+//! angle is integrated from the replayed speed, so ripple and cogging lose their phase over
+//! long records). Outputs: `y:current` (A), `y:speed` (rad/s).
+//!
+//! Catalogue (each switched on by name; the fitted parameters are model parameters):
+//! `coulomb_friction` (`tau_c sign(w)`), `torque_ripple` (motor torque times
+//! `1 + B sin(3 N theta)`), `cogging` (`C sin(N theta / 2)`), `driver_lowpass` (first-order
+//! current lag, bandwidth `w_d`), `backemf_limit` (the f3 voltage headroom, fitted through
+//! `bus_voltage`), `speed_limiter` (the f5 overspeed feedback, fitted through `overspeed`),
+//! `lubricant_torque_noise` (`J theta_a w_a^2 sin(w_a t + phase)`), `viscous_temperature`
+//! (`c_v(T) = c_v(T_ref) - viscous_slope (T - T_ref)`, the paper's `c0 - c1 (T + 30)`).
+
+use crate::gap::plant::{
+    EffectSpec, FitRange, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
+};
+use prognos_core::plants::reaction_wheel::WheelParams;
+use std::collections::BTreeMap;
+
+/// The reaction wheel gap plant.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WheelGapPlant;
+
+/// Every wheel parameter with its default (Table 2 as read in `docs/deviations.md`).
+pub const WHEEL_PARAMETERS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "drive_gain",
+        default: 0.19,
+        doc: "driver gain G_d (A/V)",
+    },
+    ParamSpec {
+        name: "driver_bandwidth",
+        default: 9.0,
+        doc: "driver bandwidth w_d (rad/s), driver_lowpass",
+    },
+    ParamSpec {
+        name: "torque_constant",
+        default: 0.029,
+        doc: "K_t (N m/A)",
+    },
+    ParamSpec {
+        name: "back_emf",
+        default: 0.029,
+        doc: "K_e (V s/rad)",
+    },
+    ParamSpec {
+        name: "speed_limiter_gain",
+        default: 95.0,
+        doc: "K_s (V s/rad), speed_limiter",
+    },
+    ParamSpec {
+        name: "overspeed",
+        default: 690.0,
+        doc: "w_s (rad/s), speed_limiter",
+    },
+    ParamSpec {
+        name: "coulomb_friction",
+        default: 0.002,
+        doc: "tau_c (N m), coulomb_friction",
+    },
+    ParamSpec {
+        name: "coulomb_smoothing",
+        default: 0.5,
+        doc: "speed scale of the smooth sign (rad/s)",
+    },
+    ParamSpec {
+        name: "inertia",
+        default: 0.0077,
+        doc: "J (kg m^2)",
+    },
+    ParamSpec {
+        name: "poles",
+        default: 36.0,
+        doc: "N motor poles",
+    },
+    ParamSpec {
+        name: "torque_ripple",
+        default: 0.22,
+        doc: "B (fraction), torque_ripple",
+    },
+    ParamSpec {
+        name: "cogging",
+        default: 0.0,
+        doc: "C (N m), cogging",
+    },
+    ParamSpec {
+        name: "input_resistance",
+        default: 2.0,
+        doc: "R_in (ohm), backemf_limit",
+    },
+    ParamSpec {
+        name: "voltage_feedback_gain",
+        default: 0.5,
+        doc: "K_f (V/V), backemf_limit",
+    },
+    ParamSpec {
+        name: "bus_voltage",
+        default: 28.0,
+        doc: "V_bus (V), backemf_limit",
+    },
+    ParamSpec {
+        name: "bridge_resistance",
+        default: 2.0,
+        doc: "R_B (ohm), backemf_limit",
+    },
+    ParamSpec {
+        name: "quiescent_power",
+        default: 3.0,
+        doc: "P_q (W), backemf_limit",
+    },
+    ParamSpec {
+        name: "noise_angle",
+        default: 0.05,
+        doc: "theta_a (rad), lubricant_torque_noise",
+    },
+    ParamSpec {
+        name: "noise_frequency",
+        default: 0.2,
+        doc: "w_a (rad/s), lubricant_torque_noise",
+    },
+    ParamSpec {
+        name: "noise_phase",
+        default: 0.0,
+        doc: "phase (rad), lubricant_torque_noise",
+    },
+    ParamSpec {
+        name: "viscous_coefficient",
+        default: 3.84e-5,
+        doc: "c_v at reference_temperature (N m s/rad)",
+    },
+    ParamSpec {
+        name: "viscous_slope",
+        default: 2.0e-7,
+        doc: "c1 (N m s/rad/degC), viscous_temperature",
+    },
+    ParamSpec {
+        name: "reference_temperature",
+        default: 23.0,
+        doc: "T_ref (degC) of viscous_coefficient",
+    },
+];
+
+/// The wheel's own catalogue.
+pub fn wheel_effects() -> Vec<EffectSpec> {
+    let one = |name: &'static str, doc: &'static str, p: &'static str, lo, hi, scale| EffectSpec {
+        name,
+        doc,
+        fit: vec![FitRange {
+            name: p,
+            lo,
+            hi,
+            scale,
+        }],
+        needs_inputs: Vec::new(),
+    };
+    let mut viscous = one(
+        "viscous_temperature",
+        "viscous coefficient falls with lubricant temperature",
+        "viscous_slope",
+        1e-12,
+        1e-5,
+        Scale::Log,
+    );
+    viscous.needs_inputs.push("temperature");
+    vec![
+        one(
+            "coulomb_friction",
+            "dry bearing friction tau_c sign(w)",
+            "coulomb_friction",
+            1e-8,
+            1e-1,
+            Scale::Log,
+        ),
+        one(
+            "torque_ripple",
+            "motor torque times 1 + B sin(3 N theta)",
+            "torque_ripple",
+            1e-3,
+            1e4,
+            Scale::Log,
+        ),
+        one(
+            "cogging",
+            "cogging torque C sin(N theta / 2)",
+            "cogging",
+            1e-8,
+            1e-1,
+            Scale::Log,
+        ),
+        one(
+            "driver_lowpass",
+            "first-order current lag, bandwidth w_d",
+            "driver_bandwidth",
+            0.05,
+            1000.0,
+            Scale::Log,
+        ),
+        one(
+            "backemf_limit",
+            "f3 voltage-headroom feedback (through V_bus)",
+            "bus_voltage",
+            8.0,
+            60.0,
+            Scale::Linear,
+        ),
+        one(
+            "speed_limiter",
+            "f5 overspeed feedback (through w_s)",
+            "overspeed",
+            10.0,
+            1200.0,
+            Scale::Linear,
+        ),
+        EffectSpec {
+            name: "lubricant_torque_noise",
+            doc: "periodic lubricant torque J theta_a w_a^2 sin(w_a t + phase)",
+            fit: vec![
+                FitRange {
+                    name: "noise_angle",
+                    lo: 1e-7,
+                    hi: 10.0,
+                    scale: Scale::Log,
+                },
+                FitRange {
+                    name: "noise_phase",
+                    lo: 0.0,
+                    hi: std::f64::consts::TAU,
+                    scale: Scale::Linear,
+                },
+            ],
+            needs_inputs: Vec::new(),
+        },
+        viscous,
+    ]
+}
+
+/// Which effects a replay has on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct On {
+    coulomb: bool,
+    ripple: bool,
+    cogging: bool,
+    lowpass: bool,
+    emf: bool,
+    limiter: bool,
+    noise: bool,
+    viscous_t: bool,
+}
+
+impl On {
+    fn from(active: &[&str]) -> Self {
+        let has = |n: &str| active.contains(&n);
+        Self {
+            coulomb: has("coulomb_friction"),
+            ripple: has("torque_ripple"),
+            cogging: has("cogging"),
+            lowpass: has("driver_lowpass"),
+            emf: has("backemf_limit"),
+            limiter: has("speed_limiter"),
+            noise: has("lubricant_torque_noise"),
+            viscous_t: has("viscous_temperature"),
+        }
+    }
+}
+
+struct Wheel {
+    p: WheelParams<f64>,
+    on: On,
+    viscous: f64,
+    viscous_slope: f64,
+    reference_temperature: f64,
+    noise_phase: f64,
+}
+
+impl Wheel {
+    fn new(params: &Params, on: On) -> Self {
+        let mut p = WheelParams::<f64>::ithaco_type_a();
+        let g = |n: &str| param(params, n);
+        p.drive_gain = g("drive_gain");
+        p.driver_bandwidth = g("driver_bandwidth");
+        p.torque_constant = g("torque_constant");
+        p.back_emf = g("back_emf");
+        p.speed_limiter_gain = g("speed_limiter_gain");
+        p.overspeed = g("overspeed");
+        p.coulomb_friction = g("coulomb_friction");
+        p.coulomb_smoothing = g("coulomb_smoothing").max(1e-9);
+        p.inertia = g("inertia");
+        p.poles = g("poles");
+        p.torque_ripple = g("torque_ripple");
+        p.cogging = g("cogging");
+        p.input_resistance = g("input_resistance");
+        p.voltage_feedback_gain = g("voltage_feedback_gain");
+        p.bus_voltage = g("bus_voltage");
+        p.bridge_resistance = g("bridge_resistance");
+        p.quiescent_power = g("quiescent_power");
+        p.noise_angle = g("noise_angle");
+        p.noise_frequency = g("noise_frequency");
+        Self {
+            p,
+            on,
+            viscous: g("viscous_coefficient"),
+            viscous_slope: g("viscous_slope"),
+            reference_temperature: g("reference_temperature"),
+            noise_phase: g("noise_phase"),
+        }
+    }
+
+    fn viscous_at(&self, temperature: f64) -> f64 {
+        if self.on.viscous_t {
+            (self.viscous - self.viscous_slope * (temperature - self.reference_temperature))
+                .max(self.p.viscous_floor)
+        } else {
+            self.viscous
+        }
+    }
+
+    fn feedback(&self, current: f64, speed: f64) -> f64 {
+        let mut v = 0.0;
+        if self.on.emf {
+            v += self.p.emf_limit_feedback(current, speed);
+        }
+        if self.on.limiter {
+            v -= self.p.speed_limit_feedback(speed);
+        }
+        v
+    }
+
+    fn rhs(&self, current: f64, speed: f64, visc: f64, command: f64, extra: f64) -> (f64, f64) {
+        let p = &self.p;
+        let di = if self.on.lowpass {
+            p.driver_bandwidth
+                * (p.drive_gain * (command + self.feedback(current, speed)) - current)
+        } else {
+            0.0
+        };
+        let coulomb = if self.on.coulomb {
+            p.coulomb_torque(speed)
+        } else {
+            0.0
+        };
+        (
+            di,
+            (p.torque_constant * current - visc * speed - coulomb + extra) / p.inertia,
+        )
+    }
+}
+
+impl GapPlant for WheelGapPlant {
+    fn name(&self) -> &'static str {
+        "reaction_wheel"
+    }
+
+    fn parameters(&self) -> Vec<ParamSpec> {
+        WHEEL_PARAMETERS.to_vec()
+    }
+
+    fn required_inputs(&self) -> Vec<&'static str> {
+        vec!["command"]
+    }
+
+    fn outputs(&self) -> Vec<&'static str> {
+        vec!["current", "speed"]
+    }
+
+    fn effects(&self) -> Vec<EffectSpec> {
+        wheel_effects()
+    }
+
+    fn simulate(
+        &self,
+        params: &Params,
+        active: &[&str],
+        data: &PlantData,
+    ) -> Result<Simulation, String> {
+        let on = On::from(active);
+        let w = Wheel::new(params, on);
+        let p = w.p;
+        if !(p.inertia > 0.0 && w.viscous > 0.0) {
+            return Err("inertia and viscous_coefficient must be positive".into());
+        }
+        let n = data.len();
+        let command = data.input("command").ok_or("missing u:command")?;
+        let temperature = data.input("temperature");
+        let measured_angle = data.input("angle");
+        let mut speed = data.first_output("speed").unwrap_or(0.0);
+        let mut current = if on.lowpass {
+            data.first_output("current")
+                .unwrap_or(p.drive_gain * command[0])
+        } else {
+            p.drive_gain * command[0]
+        };
+        let mut angle = measured_angle.map_or(0.0, |a| a[0]);
+        let mut out_i = Vec::with_capacity(n);
+        let mut out_w = Vec::with_capacity(n);
+        for k in 0..n {
+            // The sample at t_k shows the current of the previous step: the command of
+            // step k acts from t_k on (zero-order hold).
+            out_i.push(current);
+            out_w.push(speed);
+            if k + 1 == n {
+                break;
+            }
+            let v = command[k];
+            let dt = data.t[k + 1] - data.t[k];
+            let visc = w.viscous_at(temperature.map_or(w.reference_temperature, |t| t[k]));
+            let extra = if on.noise {
+                p.inertia
+                    * p.noise_angle
+                    * p.noise_frequency
+                    * p.noise_frequency
+                    * (p.noise_frequency * (data.t[k] + 0.5 * dt) + w.noise_phase).sin()
+            } else {
+                0.0
+            };
+            // Sub-steps keep RK4 accurate for a fast driver (w_d h <= 1, inside its
+            // stability limit 2.8) and let the limiter feedback follow the speed.
+            let substeps = if on.lowpass {
+                (p.driver_bandwidth * dt).ceil().max(1.0) as usize
+            } else if on.emf || on.limiter {
+                4
+            } else {
+                1
+            };
+            let h = dt / substeps as f64;
+            let algebraic = |current: &mut f64, speed: f64| {
+                for _ in 0..3 {
+                    *current = p.drive_gain * (v + w.feedback(*current, speed));
+                }
+            };
+            if !on.lowpass {
+                algebraic(&mut current, speed);
+            }
+            let (i0, w0) = (current, speed);
+            for sub in 0..substeps {
+                if !on.lowpass && sub > 0 {
+                    algebraic(&mut current, speed);
+                }
+                let (ci, cw) = (current, speed);
+                let (a1, b1) = w.rhs(ci, cw, visc, v, extra);
+                let (a2, b2) = w.rhs(ci + 0.5 * h * a1, cw + 0.5 * h * b1, visc, v, extra);
+                let (a3, b3) = w.rhs(ci + 0.5 * h * a2, cw + 0.5 * h * b2, visc, v, extra);
+                let (a4, b4) = w.rhs(ci + h * a3, cw + h * b3, visc, v, extra);
+                current = ci + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4);
+                speed = cw + h / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4);
+            }
+            if let Some(a) = measured_angle {
+                angle = a[k];
+            }
+            let mean_speed = 0.5 * (w0 + speed);
+            let angle_end = angle + mean_speed * dt;
+            // Ripple and cogging oscillate far above the sample rate: exact integral of
+            // sin(k theta) over the step at the mean speed.
+            let integral = |kk: f64| -> f64 {
+                if (kk * mean_speed * dt).abs() > 1e-6 {
+                    ((kk * angle).cos() - (kk * angle_end).cos()) / (kk * mean_speed)
+                } else {
+                    (kk * angle).sin() * dt
+                }
+            };
+            if on.ripple {
+                speed += p.torque_constant
+                    * 0.5
+                    * (i0 + current)
+                    * p.torque_ripple
+                    * integral(3.0 * p.poles)
+                    / p.inertia;
+            }
+            if on.cogging {
+                speed += p.cogging * integral(0.5 * p.poles) / p.inertia;
+            }
+            angle = angle_end.rem_euclid(std::f64::consts::TAU);
+            if !(speed.is_finite() && current.is_finite()) {
+                return Err(format!("replay diverged at t = {}", data.t[k]));
+            }
+        }
+        let mut states = BTreeMap::new();
+        states.insert("current".to_string(), out_i.clone());
+        states.insert("speed".to_string(), out_w.clone());
+        Ok(Simulation {
+            outputs: vec![out_i, out_w],
+            states,
+        })
+    }
+
+    fn initial_window(&self) -> f64 {
+        // The speed forgets its initial error over J / c_v = 200 s: pin it to 1/sqrt(40)
+        // of the noise with the first 2 s (40 samples at 20 Hz).
+        2.0
+    }
+
+    fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {
+        let n = data.len();
+        let speed: Vec<f64> = data
+            .output("speed")
+            .map_or_else(|| nominal.outputs[1].clone(), <[f64]>::to_vec);
+        let sim_speed = &nominal.outputs[1];
+        let accel: Vec<f64> = (0..n)
+            .map(|k| {
+                let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+                if b > a {
+                    (sim_speed[b] - sim_speed[a]) / (data.t[b] - data.t[a])
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let command = data.input("command").unwrap_or(&[]);
+        let mut since_step = vec![f64::INFINITY; n];
+        let mut last = f64::NEG_INFINITY;
+        for (k, since) in since_step.iter_mut().enumerate() {
+            if k > 0 && command.get(k) != command.get(k - 1) {
+                last = data.t[k];
+            }
+            *since = data.t[k] - last;
+        }
+        let mask = |f: &dyn Fn(usize) -> bool| (0..n).map(f).collect::<Vec<bool>>();
+        let mut out = vec![
+            Regime {
+                label: "zero_crossing".into(),
+                mask: mask(&|k| speed[k].abs() < 5.0),
+            },
+            Regime {
+                label: "low_speed".into(),
+                mask: mask(&|k| speed[k].abs() < 50.0),
+            },
+            Regime {
+                label: "high_speed".into(),
+                mask: mask(&|k| speed[k].abs() > 400.0),
+            },
+            Regime {
+                label: "reverse".into(),
+                mask: mask(&|k| speed[k] < 0.0),
+            },
+            Regime {
+                label: "accelerating".into(),
+                mask: mask(&|k| accel[k].abs() > 0.5),
+            },
+            Regime {
+                label: "steady".into(),
+                mask: mask(&|k| accel[k].abs() <= 0.5),
+            },
+            Regime {
+                label: "after_command_step".into(),
+                mask: mask(&|k| since_step[k] < 1.0),
+            },
+        ];
+        if let Some(temp) = data.input("temperature")
+            && let Some(mid) = crate::gap::stats::median(temp)
+        {
+            out.push(Regime {
+                label: "warm".into(),
+                mask: mask(&|k| temp[k] > mid),
+            });
+            out.push(Regime {
+                label: "cool".into(),
+                mask: mask(&|k| temp[k] <= mid),
+            });
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plants::reaction_wheel::{TruthWheel, WheelEffects};
+
+    fn profile(n: usize) -> PlantData {
+        let dt = 0.05;
+        let mut d = PlantData {
+            dt,
+            ..Default::default()
+        };
+        d.t = (0..n).map(|k| k as f64 * dt).collect();
+        let cmd: Vec<f64> = (0..n).map(|k| if k < n / 2 { 3.0 } else { -2.0 }).collect();
+        d.inputs.insert("command".into(), cmd);
+        d
+    }
+
+    #[test]
+    fn replay_matches_the_truth_plant_with_the_same_effects() {
+        let n = 2000;
+        let mut data = profile(n);
+        let mut truth = TruthWheel::new();
+        truth.effects = WheelEffects {
+            driver_lowpass: true,
+            emf_limiting: false,
+            speed_limiter: false,
+            coulomb_friction: true,
+            viscous_temperature: false,
+            torque_ripple: false,
+            cogging: false,
+            torque_noise: false,
+        };
+        truth.settle(3.0, 23.0);
+        let (mut i, mut w) = (Vec::new(), Vec::new());
+        for k in 0..n {
+            i.push(truth.current);
+            w.push(truth.speed);
+            truth.step(data.inputs["command"][k], 23.0, 0.05);
+        }
+        data.outputs.insert("current".into(), i);
+        data.outputs.insert("speed".into(), w.clone());
+        let plant = WheelGapPlant;
+        let params = plant.default_params();
+        let sim = plant
+            .simulate(&params, &["driver_lowpass", "coulomb_friction"], &data)
+            .unwrap();
+        let err = sim.outputs[1]
+            .iter()
+            .zip(&w)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(err < 1e-6, "{err}");
+        let without = plant.simulate(&params, &["driver_lowpass"], &data).unwrap();
+        let gap = without.outputs[1]
+            .iter()
+            .zip(&w)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(gap > 1.0, "coulomb friction must matter: {gap}");
+    }
+
+    #[test]
+    fn ripple_and_cogging_replay_with_the_measured_angle() {
+        let n = 3000;
+        let mut data = profile(n);
+        let mut truth = TruthWheel::new();
+        truth.effects = WheelEffects {
+            driver_lowpass: false,
+            emf_limiting: false,
+            speed_limiter: false,
+            coulomb_friction: false,
+            viscous_temperature: false,
+            torque_ripple: true,
+            cogging: true,
+            torque_noise: false,
+        };
+        truth.params.torque_ripple = 50.0;
+        truth.params.cogging = 1e-3;
+        truth.settle(3.0, 23.0);
+        let (mut i, mut w, mut a) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..n {
+            i.push(truth.current);
+            w.push(truth.speed);
+            a.push(truth.angle);
+            truth.step(data.inputs["command"][k], 23.0, 0.05);
+        }
+        data.outputs.insert("current".into(), i);
+        data.outputs.insert("speed".into(), w.clone());
+        data.inputs.insert("angle".into(), a);
+        let plant = WheelGapPlant;
+        let mut params = plant.default_params();
+        params.insert("torque_ripple".into(), 50.0);
+        params.insert("cogging".into(), 1e-3);
+        let sim = plant
+            .simulate(&params, &["torque_ripple", "cogging"], &data)
+            .unwrap();
+        let err = sim.outputs[1]
+            .iter()
+            .zip(&w)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        let off = plant.simulate(&params, &[], &data).unwrap();
+        let effect = off.outputs[1]
+            .iter()
+            .zip(&w)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        assert!(effect > 5e-3, "{effect}");
+        assert!(err < 1e-3 * effect, "{err} vs {effect}");
+    }
+}

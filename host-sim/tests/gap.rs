@@ -1,0 +1,215 @@
+//! Issue 8: `prognos gap` end to end on generated data whose effect it is not told about,
+//! its bad-input errors (exit status 2, file:line:column), and a small bounded gap-bench.
+
+use prognos_sim::gap::bench::{BenchOptions, CaseKind, Dataset, generate, run_one, score};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("prognos-gap-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn prognos(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_prognos"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn one(plant: &str, effect: &str, ratio: f64) -> Dataset {
+    let opts = BenchOptions {
+        plants: vec![plant.into()],
+        seeds: 1,
+        ratios: vec![ratio],
+        seed: 7,
+        only: vec![effect.into()],
+        extra_sets: 0,
+    };
+    generate(plant, &opts).unwrap().remove(0)
+}
+
+fn write(dir: &Path, d: &Dataset) -> PathBuf {
+    let csv = dir.join("data.csv");
+    std::fs::write(&csv, &d.csv).unwrap();
+    std::fs::write(dir.join("data.csv.meta.toml"), &d.meta).unwrap();
+    csv
+}
+
+#[test]
+fn gap_finds_lubricant_torque_noise_in_wheel_data_and_writes_the_report() {
+    let dir = scratch("wheel");
+    let d = one("reaction_wheel", "lubricant_torque_noise", 4.0);
+    assert_eq!(d.label.channel.as_deref(), Some("y:speed"));
+    let csv = write(&dir, &d);
+    let out = dir.join("out");
+    let o = prognos(&["gap", "--data", s(&csv), "--out", s(&out)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let verdict: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
+    assert_eq!(verdict["plant"], "reaction_wheel");
+    assert_eq!(verdict["verdict"], "lubricant_torque_noise");
+    assert_eq!(verdict["where"]["channel"], "y:speed");
+    assert_eq!(verdict["where"]["significant"], true);
+    let top = &verdict["ranking"][0];
+    assert_eq!(top["effect"], "lubricant_torque_noise");
+    let shrink = top["shrink"].as_f64().unwrap();
+    assert!(shrink > 0.8, "held-out shrink {shrink}");
+    // Amplitude and phase fitted; the phase inside its range.
+    assert_eq!(top["params"].as_array().unwrap().len(), 2);
+    let phase = top["params"][1][1].as_f64().unwrap();
+    assert!((0.0..=std::f64::consts::TAU).contains(&phase), "{phase}");
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        html.matches("<svg").count() >= 4,
+        "heat map, spectrum, ranking, overlay"
+    );
+    assert!(html.contains("lubricant_torque_noise"));
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("| 1 | lubricant_torque_noise |"), "{md}");
+}
+
+#[test]
+fn gap_says_none_on_nominal_motor_data() {
+    // `only` naming no effect leaves only the extra sets.
+    let opts = BenchOptions {
+        plants: vec!["dc_motor".into()],
+        seeds: 1,
+        ratios: vec![],
+        seed: 7,
+        only: vec!["no-such-effect".into()],
+        extra_sets: 1,
+    };
+    let sets = generate("dc_motor", &opts).unwrap();
+    let none = sets
+        .iter()
+        .find(|x| x.label.kind == CaseKind::None)
+        .unwrap();
+    let o = run_one(none).unwrap();
+    assert_eq!(o.verdict, "none", "top 3: {:?}", o.top3);
+}
+
+fn bad(dir: &Path, csv_text: &str, meta_text: Option<&str>) -> (i32, String) {
+    let csv = dir.join("data.csv");
+    std::fs::write(&csv, csv_text).unwrap();
+    let meta = dir.join("data.csv.meta.toml");
+    let _ = std::fs::remove_file(&meta);
+    if let Some(m) = meta_text {
+        std::fs::write(&meta, m).unwrap();
+    }
+    let o = prognos(&["gap", "--data", s(&csv), "--out", s(&dir.join("out"))]);
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn bad_input_exits_2_and_says_which_and_where() {
+    let dir = scratch("bad");
+    let good = one("dc_motor", "coulomb_friction", 4.0);
+    let meta_path = dir.join("data.csv.meta.toml");
+    let m = s(&meta_path).to_string();
+    let c = s(&dir.join("data.csv")).to_string();
+
+    let (code, err) = bad(&dir, &good.csv, None);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("missing meta file") && err.contains(&m),
+        "{err}"
+    );
+
+    let (code, err) = bad(&dir, &good.csv, Some("plant = \"toaster\"\ndt = 0.01\n"));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(&format!("{m}:1:9: unknown plant `toaster`")),
+        "{err}"
+    );
+
+    let text = "plant = \"dc_motor\"\ndt = 0.01\n[model]\nresistance = 2.0\nresistanse = 2.1\n";
+    let (code, err) = bad(&dir, &good.csv, Some(text));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(&format!("{m}:5:1: unknown parameter `resistanse`")),
+        "{err}"
+    );
+
+    let text = "plant = \"dc_motor\"\ndt = 0.01\nsim_effects = [\"brush_drop\", \"warp_drive\"]\n";
+    let (code, err) = bad(&dir, &good.csv, Some(text));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(&format!("{m}:3:30: unknown effect `warp_drive`")),
+        "{err}"
+    );
+
+    let text = "plant = \"dc_motor\"\ndt = 0.01\n[units]\n\"y:torque\" = \"N m\"\n";
+    let (code, err) = bad(&dir, &good.csv, Some(text));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(&format!(
+            "{m}:4:1: channel `y:torque` named in the meta file is not a column of {c}"
+        )),
+        "{err}"
+    );
+
+    let no_voltage = good.csv.replacen("u:voltage", "u:volts", 1);
+    let (code, err) = bad(&dir, &no_voltage, Some(&good.meta));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(&format!(
+            "{c}:1:1: plant `dc_motor` needs the input column `u:voltage`"
+        )),
+        "{err}"
+    );
+
+    let short: String = good
+        .csv
+        .lines()
+        .take(51)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let (code, err) = bad(&dir, &short, Some(&good.meta));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(&format!("{c}:51:1: too little data to split: 50 samples")),
+        "{err}"
+    );
+}
+
+#[test]
+fn small_gap_bench_attributes_localises_and_rejects() {
+    // Bounded: DC motor, two catalogue effects and two sensor effects at ratio 4, one seed,
+    // plus one no-effect set, one pair and one set per out-of-catalogue effect.
+    let opts = BenchOptions {
+        plants: vec!["dc_motor".into()],
+        seeds: 1,
+        ratios: vec![4.0],
+        seed: 11,
+        only: vec![
+            "coulomb_friction".into(),
+            "brush_drop".into(),
+            "sensor_scale".into(),
+            "measurement_delay".into(),
+        ],
+        extra_sets: 1,
+    };
+    let sets = generate("dc_motor", &opts).unwrap();
+    assert_eq!(
+        sets.iter()
+            .filter(|d| d.label.kind == CaseKind::Single)
+            .count(),
+        4
+    );
+    let outcomes: Vec<_> = sets.iter().map(|d| run_one(d).unwrap()).collect();
+    let sc = score(&outcomes, |r| r >= 2.0);
+    assert_eq!(sc.top1, 1.0, "{outcomes:#?}");
+    assert_eq!(sc.localisation, 1.0, "{outcomes:#?}");
+    assert!(sc.median_shrink > 0.8, "{}", sc.median_shrink);
+    assert_eq!(sc.false_attribution, 0.0, "{outcomes:#?}");
+}
