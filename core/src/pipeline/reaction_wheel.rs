@@ -431,21 +431,45 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         {
             *s = Vector3::new(x0, b.x, beta.x);
         }
-        let mut temperature = future_temperature;
+        let mut weights = [T::zero(); M];
+        for (i, w) in weights.iter_mut().enumerate() {
+            *w = self.ratio.filter().weight(i) * self.rate.filter().weight(i);
+        }
+        Self::rul_of_states(
+            threshold,
+            future_temperature,
+            (step_s, max_steps),
+            states,
+            &weights,
+            times,
+            buf,
+            rng,
+        )
+    }
+
+    /// Propagates `states` (`[X, b, beta]`) to the consumption threshold and summarises the
+    /// weighted end-of-life times: the part [`Self::rul`] and [`Self::rul_kalman`] share.
+    #[allow(clippy::too_many_arguments)]
+    fn rul_of_states<R: Rng + ?Sized>(
+        threshold: T,
+        mut future_temperature: impl FnMut(u32) -> T,
+        (step_s, max_steps): (T, u32),
+        states: &[Vector3<T>; M],
+        weights: &[T; M],
+        times: &mut [T; M],
+        buf: &mut [(T, T); M],
+        rng: &mut R,
+    ) -> Result<Summary<T>, Error> {
         predict_eol(
             &LossAccumulationModel,
             &ConsumptionThreshold(threshold),
             states.as_slice(),
-            |k| SVector::<T, 1>::from([temperature(k)]),
+            |k| SVector::<T, 1>::from([future_temperature(k)]),
             &PredictionSettings::deterministic(step_s, max_steps),
             rng,
             times.as_mut_slice(),
         )?;
-        let mut weights = [T::zero(); M];
-        for (w, (i, _)) in weights.iter_mut().zip(times.iter().enumerate()) {
-            *w = self.ratio.filter().weight(i) * self.rate.filter().weight(i);
-        }
-        rul_distribution(times.as_slice(), &weights, buf.as_mut_slice())
+        rul_distribution(times.as_slice(), weights, buf.as_mut_slice())
             .ok_or(Error::InsufficientData)
     }
 
@@ -476,19 +500,17 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             let sample = mean + l * z;
             *s = Vector3::new(x0, sample.x, sample.y.exp());
         }
-        let mut temperature = future_temperature;
-        predict_eol(
-            &LossAccumulationModel,
-            &ConsumptionThreshold(threshold),
-            states.as_slice(),
-            |k| SVector::<T, 1>::from([temperature(k)]),
-            &PredictionSettings::deterministic(step_s, max_steps),
-            rng,
-            times.as_mut_slice(),
-        )?;
         let weights = [T::one() / cast::<T>(M as f64); M];
-        rul_distribution(times.as_slice(), &weights, buf.as_mut_slice())
-            .ok_or(Error::InsufficientData)
+        Self::rul_of_states(
+            threshold,
+            future_temperature,
+            (step_s, max_steps),
+            states,
+            &weights,
+            times,
+            buf,
+            rng,
+        )
     }
 }
 
