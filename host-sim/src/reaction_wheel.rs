@@ -802,23 +802,16 @@ impl LossEstimators {
         self.kalman.parameters()
     }
 
-    /// `count` samples `(b, beta in 1e-6 mL/s)` of the Kalman filter's Gaussian posterior.
+    /// `count` samples `(b, beta in 1e-6 mL/s)` of the Kalman filter's Gaussian posterior
+    /// (the point estimate repeated if its covariance is not positive definite).
     pub fn kalman_samples(&self, count: usize, rng: &mut impl Rng) -> Vec<(f64, f64)> {
-        let x = self.kalman.state();
-        let p = self.kalman.covariance();
-        let Some(l) = p.cholesky().map(|c| c.l()) else {
-            return vec![(x.x, x.y.exp()); count];
-        };
-        (0..count)
-            .map(|_| {
-                let z = Vector2::new(
-                    prognos_core::random::standard_normal::<f64, _>(rng),
-                    prognos_core::random::standard_normal::<f64, _>(rng),
-                );
-                let s = x + l * z;
-                (s.x, s.y.exp())
-            })
-            .collect()
+        match self.kalman.posterior_samples(rng) {
+            Ok(samples) => samples.take(count).collect(),
+            Err(_) => {
+                let x = self.kalman.state();
+                vec![(x.x, x.y.exp()); count]
+            }
+        }
     }
 
     /// One-step estimate `(b, beta in mL/s)`.

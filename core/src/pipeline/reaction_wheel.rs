@@ -21,7 +21,6 @@ use crate::plants::reaction_wheel::{
     LossRatioModel, WheelTemperatureModel,
 };
 use crate::prognose::eol::{EndOfLife, PredictionSettings, predict_eol, rul_distribution};
-use crate::random::standard_normal;
 use crate::real::{Real, cast};
 use crate::safeguard::Flags;
 use crate::stats::Summary;
@@ -488,17 +487,11 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         rng: &mut R,
     ) -> Result<Summary<T>, Error> {
         let x0 = self.last_reading.ok_or(Error::InsufficientData)?;
-        let mean = self.kalman.state();
-        let l = self
-            .kalman
-            .covariance()
-            .cholesky()
-            .ok_or(Error::NotPositiveDefinite)?
-            .l();
-        for s in states.iter_mut() {
-            let z = Vector2::new(standard_normal::<T, R>(rng), standard_normal::<T, R>(rng));
-            let sample = mean + l * z;
-            *s = Vector3::new(x0, sample.x, sample.y.exp());
+        for (s, (b, beta)) in states
+            .iter_mut()
+            .zip(self.kalman.posterior_samples(&mut *rng)?)
+        {
+            *s = Vector3::new(x0, b, beta);
         }
         let weights = [T::one() / cast::<T>(M as f64); M];
         Self::rul_of_states(

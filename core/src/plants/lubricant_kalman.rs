@@ -24,8 +24,10 @@
 use nalgebra::{Matrix2, Vector2};
 
 use super::reaction_wheel::{BETA_UNIT, IntervalExposure};
+use crate::random::standard_normal;
 use crate::safeguard::{Flags, floor_variances, symmetrise};
 use crate::{Error, Real, cast};
+use rand_core::Rng;
 
 /// Settings of [`LossKalman`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -174,6 +176,28 @@ impl<T: Real> LossKalman<T> {
     /// Covariance of the state.
     pub fn covariance(&self) -> &Matrix2<T> {
         &self.covariance
+    }
+
+    /// An endless stream of samples `(b (degC), beta (1e-6 mL/s))` of the Gaussian posterior
+    /// of `[b, ln beta]`, for RUL prediction. `Err` if the covariance is not positive definite.
+    pub fn posterior_samples<'a, R: Rng + ?Sized>(
+        &self,
+        rng: &'a mut R,
+    ) -> Result<impl Iterator<Item = (T, T)> + 'a, Error>
+    where
+        T: 'a,
+    {
+        let mean = self.state;
+        let l = self
+            .covariance
+            .cholesky()
+            .ok_or(Error::NotPositiveDefinite)?
+            .l();
+        Ok(core::iter::repeat_with(move || {
+            let z = Vector2::new(standard_normal::<T, R>(rng), standard_normal::<T, R>(rng));
+            let sample = mean + l * z;
+            (sample.x, sample.y.exp())
+        }))
     }
 
     /// Measurement variance estimated beyond the nominal one (covariance matching).
