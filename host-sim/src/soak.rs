@@ -132,6 +132,14 @@ impl Tracker {
         }
     }
 
+    /// Counts a step that returned an error; the first one is the run's failure.
+    fn error(&mut self, step: u64, error: &dyn std::fmt::Display) {
+        self.report.errors += 1;
+        if self.report.failure.is_none() {
+            self.report.failure = Some(format!("step {step}: {error}"));
+        }
+    }
+
     fn finish(mut self, steps: u64) -> SoakReport {
         self.report.steps = steps;
         self.report.total = self.started.elapsed();
@@ -209,10 +217,7 @@ fn reaction_wheel(steps: u64, seed: u64) -> SoakReport {
                 }
             }
             Err(e) => {
-                tracker.report.errors += 1;
-                if tracker.report.failure.is_none() {
-                    tracker.report.failure = Some(format!("step {k}: {e}"));
-                }
+                tracker.error(k, &e);
                 break;
             }
         }
@@ -261,10 +266,7 @@ fn scooter(steps: u64, seed: u64) -> SoakReport {
                 }
             }
             Err(e) => {
-                tracker.report.errors += 1;
-                if tracker.report.failure.is_none() {
-                    tracker.report.failure = Some(format!("step {k}: {e}"));
-                }
+                tracker.error(k, &e);
                 break;
             }
         }
