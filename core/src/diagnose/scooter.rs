@@ -8,7 +8,7 @@
 //! (the paper's `r2` times `N4`) so that `Psi` adds like units.
 
 use crate::error::Error;
-use crate::plants::scooter::ScooterParams;
+use crate::plants::scooter::{ScooterParams, rebase_angles};
 use crate::real::{Real, all_finite, cast};
 
 /// Multiplicative uncertainties `delta` of Table 3 used by the adaptive thresholds.
@@ -230,6 +230,8 @@ impl<T: Real> ScooterArr<T> {
                 }
             }
         }
+        // The integrals enter only through the twists: keep them bounded (see rebase_angles).
+        rebase_angles(&mut th_r, &mut s_m, &mut th_f, p.n4);
         self.positions = [th_r, s_m, th_f];
         self.previous_y = Some(*y);
         self.history = [residuals, h1];

@@ -11,7 +11,9 @@ use crate::diagnose::scooter::{ArrReport, FaultSet, ScooterArr, suspected_faults
 use crate::error::Error;
 use crate::filter::adaptive_ukf::{Adaptation, AdaptiveConfig, AdaptiveUkf};
 use crate::filter::ukf::{SigmaParams, Ukf};
-use crate::plants::scooter::{BETA_THETA_R, NS, NX, NY, ScooterModel};
+use crate::plants::scooter::{
+    BETA_THETA_R, NS, NX, NY, S_M, ScooterModel, THETA_F, THETA_R, rebase_angles,
+};
 use crate::prognose::sequential::{FaultEvent, IntermittentTracker, Outcome, SequentialPrognoser};
 use crate::real::{Real, all_finite, cast};
 use crate::safeguard::Flags;
@@ -275,6 +277,21 @@ impl<T: Real> Scooter<T> {
                 }
             };
         flags.insert(adaptive.flags);
+        // Keep the angle states bounded (only the twists matter): a shifted state is finite
+        // whenever the state was, so set_state cannot fail here.
+        let mut x = *self.filter.ukf().state();
+        if let (Some(a), Some(b), Some(c)) = (x.get(THETA_R), x.get(S_M), x.get(THETA_F)) {
+            let mut angles = [*a, *b, *c];
+            let [a, b, c] = &mut angles;
+            if rebase_angles(a, b, c, self.model.params.n4) {
+                for (i, v) in [THETA_R, S_M, THETA_F].into_iter().zip(angles) {
+                    if let Some(slot) = x.get_mut(i) {
+                        *slot = v;
+                    }
+                }
+                let _ = self.filter.ukf_mut().set_state(x);
+            }
+        }
 
         // Commit.
         self.arr = arr;
