@@ -1,0 +1,351 @@
+//! GP-UKF with an online degradation-rate state: the dynamic GP learned on other trials gives
+//! the shape of the increment `mu(r, u)`, and a per-unit log rate scale `theta` (estimated by
+//! the same UKF) stretches it, `r' = r + e^theta mu(r, u)`. An IMM of fixed-rate models can
+//! only pick among the rates it was trained on and forgets through its mode switching; the
+//! rate state integrates the evidence of the whole history and moves to an unseen unit's rate.
+//!
+//! State `[r, theta]`, measurement `r` (noise variance `r_var`). `theta` follows a random walk
+//! with variance `rate_walk_variance` per cycle (the effective rate drifts when the unit's
+//! growth law differs in shape from the GP's). Allocation-free like [`super::gp`].
+
+use super::gp::{GaussianProcess, GpPrediction};
+use crate::error::Error;
+use crate::filter::imm::ModeFilter;
+use crate::filter::ukf::{SigmaParams, Ukf};
+use crate::model::{Model, Observe, Stochastic, gaussian_log_likelihood};
+use crate::random::standard_normal;
+use crate::real::{Real, all_finite, cast};
+use crate::safeguard::Flags;
+use nalgebra::{Matrix1, Matrix2, SVector, Vector1, Vector2};
+use rand_core::Rng;
+
+/// Largest `|theta|` the transition uses (a scale of `e^8`, about 3000, is far outside any
+/// plausible rate; the clamp keeps `e^theta` finite for wild sigma points).
+pub const MAX_LOG_RATE: f64 = 8.0;
+
+/// Compile-time check that the GP input is `r` followed by the input.
+struct InputSize<const D: usize, const NU: usize>;
+impl<const D: usize, const NU: usize> InputSize<D, NU> {
+    const OK: () = assert!(D == NU + 1, "GP input size D must equal 1 + NU");
+}
+
+/// Transition `[r, theta] -> [r + e^theta mu(r, u), theta]` with the GP's mean `mu`.
+#[derive(Clone, Copy, Debug)]
+pub struct RateScaledTransition<'a, T: Real, const D: usize, const M: usize> {
+    pub gp: &'a GaussianProcess<T, D, M>,
+    /// Standard deviation of the measured `r` (for [`Stochastic::log_likelihood`]).
+    pub measurement_std: T,
+}
+
+impl<T: Real, const D: usize, const M: usize> RateScaledTransition<'_, T, D, M> {
+    /// `e^theta` with `theta` clamped to `+-MAX_LOG_RATE`.
+    pub fn scale(theta: T) -> T {
+        let bound: T = cast(MAX_LOG_RATE);
+        theta.max(-bound).min(bound).exp()
+    }
+
+    /// The GP at `(r, u)`.
+    pub fn predict<const NU: usize>(
+        &self,
+        x: &Vector2<T>,
+        u: &SVector<T, NU>,
+    ) -> Result<GpPrediction<T>, Error> {
+        let () = InputSize::<D, NU>::OK;
+        let mut input = SVector::<T, D>::zeros();
+        for (dst, src) in input.iter_mut().zip(core::iter::once(&x[0]).chain(u.iter())) {
+            *dst = *src;
+        }
+        self.gp.predict(&input)
+    }
+}
+
+/// A non-finite state: the filter reports [`Error::NonFiniteState`] when the GP rejects a query.
+fn diverged<T: Real>() -> Vector2<T> {
+    Vector2::repeat(T::MAX_FINITE * cast(2.0))
+}
+
+impl<T: Real, const D: usize, const M: usize, const NU: usize> Model<T, 2, NU>
+    for RateScaledTransition<'_, T, D, M>
+{
+    fn step(&self, x: &Vector2<T>, u: &SVector<T, NU>, _dt: T) -> Vector2<T> {
+        match self.predict(x, u) {
+            Ok(p) => Vector2::new(x[0] + Self::scale(x[1]) * p.mean, x[1]),
+            Err(_) => diverged(),
+        }
+    }
+}
+
+impl<T: Real, const D: usize, const M: usize, const NU: usize> Observe<T, 2, NU, 1>
+    for RateScaledTransition<'_, T, D, M>
+{
+    fn observe(&self, x: &Vector2<T>, _u: &SVector<T, NU>) -> Vector1<T> {
+        Vector1::new(x[0])
+    }
+}
+
+impl<T: Real, const D: usize, const M: usize, const NU: usize> Stochastic<T, 2, NU>
+    for RateScaledTransition<'_, T, D, M>
+{
+    fn measurement_len(&self) -> usize {
+        1
+    }
+
+    /// One draw of the increment from the GP's predictive distribution, stretched by the
+    /// unit's rate: `r + e^theta (mu + sqrt(var) N(0, 1))`; `theta` is kept (the rate of a
+    /// propagated sample is the one drawn from the posterior).
+    fn sample_step<R: Rng + ?Sized>(
+        &self,
+        x: &Vector2<T>,
+        u: &SVector<T, NU>,
+        _dt: T,
+        rng: &mut R,
+    ) -> Vector2<T> {
+        match self.predict(x, u) {
+            Ok(p) => {
+                let increment = p.mean + p.variance().sqrt() * standard_normal::<T, R>(rng);
+                Vector2::new(x[0] + Self::scale(x[1]) * increment, x[1])
+            }
+            Err(_) => diverged(),
+        }
+    }
+
+    fn log_likelihood(&self, x: &Vector2<T>, _u: &SVector<T, NU>, y: &[T]) -> T {
+        gaussian_log_likelihood(y, &[x[0]], &[self.measurement_std])
+    }
+}
+
+/// What one step of the rate-scaled GP-UKF did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RateScaledReport<T: Real> {
+    pub innovation: T,
+    pub innovation_variance: T,
+    /// `ln N(innovation; 0, S)`, the mode likelihood in an IMM.
+    pub log_likelihood: T,
+    /// The GP was queried outside its training range at the prior mean.
+    pub extrapolating: bool,
+    pub flags: Flags,
+}
+
+/// The GP-UKF over `[r, theta]` (Table 2 of Anger et al. with the augmented rate state).
+#[derive(Clone, Debug)]
+pub struct RateScaledGpUkf<'a, T: Real, const NU: usize, const D: usize, const M: usize> {
+    ukf: Ukf<T, 2, 5>,
+    transition: RateScaledTransition<'a, T, D, M>,
+    r_var: T,
+    rate_walk_variance: T,
+}
+
+impl<'a, T: Real, const NU: usize, const D: usize, const M: usize> RateScaledGpUkf<'a, T, NU, D, M> {
+    /// Prior `N(x0, p0)` over `[r, theta]` (the `theta` prior is the spread of rates over the
+    /// training units), measurement noise variance `r_var`, rate random walk variance per cycle.
+    pub fn new(
+        transition: RateScaledTransition<'a, T, D, M>,
+        x0: Vector2<T>,
+        p0: Matrix2<T>,
+        r_var: T,
+        rate_walk_variance: T,
+        params: SigmaParams<T>,
+    ) -> Result<Self, Error> {
+        if !(r_var.finite() && r_var > T::zero()) {
+            return Err(Error::InvalidParameter("r"));
+        }
+        if !(rate_walk_variance.finite() && rate_walk_variance >= T::zero()) {
+            return Err(Error::InvalidParameter("rate walk variance"));
+        }
+        let ukf = Ukf::new(x0, p0, Matrix2::zeros(), params)?;
+        Ok(Self {
+            ukf,
+            transition,
+            r_var,
+            rate_walk_variance,
+        })
+    }
+
+    pub fn state(&self) -> &Vector2<T> {
+        self.ukf.state()
+    }
+    pub fn covariance(&self) -> &Matrix2<T> {
+        self.ukf.covariance()
+    }
+    pub fn transition(&self) -> &RateScaledTransition<'a, T, D, M> {
+        &self.transition
+    }
+
+    /// One cycle: predict with input `u`, then fuse measurement `z` (one value). Errors leave
+    /// the filter unchanged.
+    pub fn step(&mut self, u: &SVector<T, NU>, z: &[T]) -> Result<RateScaledReport<T>, Error> {
+        if z.len() != 1 {
+            return Err(Error::MeasurementLength {
+                expected: 1,
+                got: z.len(),
+            });
+        }
+        if !all_finite(z) {
+            return Err(Error::NonFiniteMeasurement);
+        }
+        if !all_finite(u.as_slice()) {
+            return Err(Error::NonFiniteInput);
+        }
+        // Q from the GP variance at the prior mean, stretched like the mean.
+        let x = *self.ukf.state();
+        let p = self.transition.predict(&x, u)?;
+        let scale = RateScaledTransition::<T, D, M>::scale(x[1]);
+        let q = Matrix2::new(
+            scale * scale * p.variance(),
+            T::zero(),
+            T::zero(),
+            self.rate_walk_variance,
+        );
+        let mut ukf = self.ukf.clone();
+        ukf.set_process_noise(q)?;
+        let mut flags = ukf.predict(&self.transition, u, T::one())?;
+        let report = ukf.update(&self.transition, u, z, &Matrix1::new(self.r_var))?;
+        flags.insert(report.flags);
+        let s = report.innovation_cov[(0, 0)];
+        if !(s > T::zero()) {
+            return Err(Error::NotPositiveDefinite);
+        }
+        let two_pi: T = cast(core::f64::consts::TAU);
+        let log_likelihood = -(report.nis + s.ln() + two_pi.ln()) * cast(0.5);
+        self.ukf = ukf;
+        Ok(RateScaledReport {
+            innovation: report.innovation[0],
+            innovation_variance: s,
+            log_likelihood,
+            extrapolating: p.extrapolating,
+            flags,
+        })
+    }
+}
+
+impl<T: Real, const NU: usize, const D: usize, const M: usize> ModeFilter<T, 2>
+    for RateScaledGpUkf<'_, T, NU, D, M>
+{
+    type Input = SVector<T, NU>;
+
+    fn mode_state(&self) -> Vector2<T> {
+        *self.ukf.state()
+    }
+    fn mode_covariance(&self) -> Matrix2<T> {
+        *self.ukf.covariance()
+    }
+    fn reinitialise(&mut self, x: &Vector2<T>, p: &Matrix2<T>) -> Result<(), Error> {
+        let mut ukf = self.ukf.clone();
+        ukf.set_state(*x)?;
+        ukf.set_covariance(*p)?;
+        self.ukf = ukf;
+        Ok(())
+    }
+    fn filter_step(&mut self, input: &SVector<T, NU>, z: &[T]) -> Result<T, Error> {
+        self.step(input, z).map(|r| r.log_likelihood)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::ukf::SigmaParams;
+    use crate::learn::gp::{StateThreshold, sample_rul};
+    use rand_core::SeedableRng;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    /// A flat GP: mean increment 0.01 everywhere (one point, zero weight), tiny variance.
+    fn flat_gp() -> GaussianProcess<f64, 2, 1> {
+        GaussianProcess::from_f64(
+            &[10.0, 10.0],
+            1e-8,
+            1e-8,
+            &[[0.5, 0.5]],
+            &[0.0],
+            &[[(2e-8f64).sqrt()]],
+            0.01,
+        )
+        .unwrap()
+    }
+
+    fn filter(gp: &GaussianProcess<f64, 2, 1>) -> RateScaledGpUkf<'_, f64, 1, 2, 1> {
+        RateScaledGpUkf::new(
+            RateScaledTransition {
+                gp,
+                measurement_std: 0.02,
+            },
+            Vector2::new(0.0, 0.0),
+            Matrix2::new(4e-4, 0.0, 0.0, 0.25),
+            4e-4,
+            1e-6,
+            SigmaParams::default(),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn learns_an_unseen_units_rate_and_predicts_its_rul() {
+        let gp = flat_gp();
+        let mut f = filter(&gp);
+        // The unit degrades 1.5 times faster than the GP's training unit: theta = ln 1.5.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(11);
+        let mut r = 0.0;
+        for _ in 0..40 {
+            r += 0.015;
+            let z = r + 0.02 * standard_normal::<f64, _>(&mut rng);
+            f.step(&Vector1::new(0.5), &[z]).unwrap();
+        }
+        let theta = f.state()[1];
+        assert!((theta - 1.5f64.ln()).abs() < 0.05, "theta {theta}");
+        // True RUL to r = 1 from r = 0.6: 0.4 / 0.015 = 26.7 cycles.
+        let mut states = [Vector2::zeros(); 100];
+        let mut times = [0.0; 100];
+        sample_rul(
+            f.transition(),
+            f.state(),
+            f.covariance(),
+            &StateThreshold {
+                index: 0,
+                level: 1.0,
+            },
+            |_| Vector1::new(0.5),
+            500,
+            &mut rng,
+            &mut states,
+            &mut times,
+        )
+        .unwrap();
+        let mut buf = [(0.0, 0.0); 100];
+        let s = crate::prognose::rul_distribution(&times, &[1.0; 100], &mut buf).unwrap();
+        assert!((s.median - 27.0).abs() <= 2.0, "median {}", s.median);
+    }
+
+    #[test]
+    fn bad_input_is_rejected_and_leaves_the_filter_unchanged() {
+        let gp = flat_gp();
+        let mut f = filter(&gp);
+        f.step(&Vector1::new(0.5), &[0.01]).unwrap();
+        let before = (*f.state(), *f.covariance());
+        assert_eq!(
+            f.step(&Vector1::new(0.5), &[f64::NAN]).map(|_| ()),
+            Err(Error::NonFiniteMeasurement)
+        );
+        assert_eq!(
+            f.step(&Vector1::new(f64::INFINITY), &[0.01]).map(|_| ()),
+            Err(Error::NonFiniteInput)
+        );
+        assert_eq!(
+            f.step(&Vector1::new(0.5), &[0.01, 0.02]).map(|_| ()),
+            Err(Error::MeasurementLength {
+                expected: 1,
+                got: 2
+            })
+        );
+        assert_eq!((*f.state(), *f.covariance()), before);
+        // A wild rate is clamped, not overflowed.
+        let t = f.transition();
+        let x = <RateScaledTransition<'_, f64, 2, 1> as Model<f64, 2, 1>>::step(
+            t,
+            &Vector2::new(0.5, 1e6),
+            &Vector1::new(0.5),
+            1.0,
+        );
+        assert!(x.iter().all(|v| v.is_finite()));
+        assert!(RateScaledGpUkf::<f64, 1, 2, 1>::new(*t, Vector2::zeros(), Matrix2::identity(), -1.0, 0.0, SigmaParams::default()).is_err());
+    }
+}
