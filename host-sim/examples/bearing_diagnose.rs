@@ -1,15 +1,21 @@
 //! Per-prediction dump of the bearing campaign's IMM of 8 GP-UKFs, for diagnosing where in life
 //! the alpha band is missed. Usage:
-//! cargo run --release -p prognos-sim --example bearing_diagnose -- [first_seed] [trials] > out.csv
-use prognos_sim::bearing::prognosis::{BearingGp, PrognosisSettings, prognose};
-use prognos_sim::bearing::train::{Dataset, GP_POINTS, feature_noise_variance, train};
+//! cargo run --release -p prognos-sim --example bearing_diagnose -- [first_seed] [trials]
+//!     [imm8 | pooled-rate | imm8-rate] [rate walk variance] > out.csv
+use prognos_sim::bearing::prognosis::{
+    BearingGp, PrognosisSettings, RatePrior, prognose, prognose_rate_scaled,
+};
+use prognos_sim::bearing::train::{Dataset, GP_POINTS, feature_noise_variance, rate_prior, train};
 use prognos_sim::bearing::trial::{Trial, TrialGenerator};
+use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let first_seed: u64 = args.get(1).map_or(Ok(100), |s| s.parse())?;
     let count: usize = args.get(2).map_or(Ok(60), |s| s.parse())?;
+    let mode = args.get(3).map_or("imm8", |s| s.as_str()).to_string();
+    let walk: f64 = args.get(4).map_or(Ok(1e-5), |s| s.parse())?;
     let generator = TrialGenerator::new();
     let trials: Vec<Trial> = (0..count as u64)
         .into_par_iter()
@@ -26,10 +32,53 @@ fn main() -> anyhow::Result<()> {
         .map(|t| train(&Dataset::from_trials(&[t]), GP_POINTS)?.to_core::<GP_POINTS>())
         .collect::<anyhow::Result<_>>()?;
     let g = |i: usize| &*gps[i];
+    let pooled = train(&Dataset::from_trials(&refs), GP_POINTS)?.to_core::<GP_POINTS>()?;
+    let pivot = 0.5;
+    let prior2 = |gp: &BearingGp| -> anyhow::Result<RatePrior<2>> {
+        let (th, mean, cov) = rate_prior::<2>(gp, &refs, pivot, 0.0)?;
+        eprintln!("thetas {th:?} mean {mean:?} cov {cov:?}");
+        Ok(RatePrior {
+            mean: SVector::from([0.0, mean[0]]),
+            covariance: SMatrix::from_diagonal(&SVector::from([0.0, cov[0][0]])),
+            pivot,
+        })
+    };
+    let prior3 = |gp: &BearingGp| -> anyhow::Result<RatePrior<3>> {
+        let (th, mean, cov) = rate_prior::<3>(gp, &refs, pivot, 0.0)?;
+        eprintln!("thetas {th:?} mean {mean:?} cov {cov:?}");
+        let mut c = SMatrix::<f64, 3, 3>::zeros();
+        for i in 0..2 {
+            for j in 0..2 {
+                c[(i + 1, j + 1)] = cov[i][j];
+            }
+        }
+        Ok(RatePrior {
+            mean: SVector::from([0.0, mean[0], mean[1]]),
+            covariance: c,
+            pivot,
+        })
+    };
+    let pooled2 = prior2(&pooled)?;
+    let pooled3 = prior3(&pooled)?;
+    let priors: Vec<RatePrior<2>> = gps.iter().map(|g| prior2(g)).collect::<anyhow::Result<_>>()?;
     let rows: Vec<String> = test_set
         .par_iter()
         .map(|t| {
-            let p = prognose(std::array::from_fn::<_, 8, _>(g), t, &settings)?;
+            let p = match mode.as_str() {
+                "pooled-rate" => {
+                    prognose_rate_scaled::<2, 5, 1>([(&*pooled, pooled2)], walk, t, &settings)?
+                }
+                "pooled-tilt" => {
+                    prognose_rate_scaled::<3, 7, 1>([(&*pooled, pooled3)], walk, t, &settings)?
+                }
+                "imm8-rate" => prognose_rate_scaled::<2, 5, 8>(
+                    std::array::from_fn::<_, 8, _>(|i| (g(i), priors[i])),
+                    walk,
+                    t,
+                    &settings,
+                )?,
+                _ => prognose(std::array::from_fn::<_, 8, _>(g), t, &settings)?,
+            };
             let mut s = String::new();
             for q in &p.predictions {
                 let truth = (t.pitting[q.cycle] - 5.0) / 65.0;

@@ -4,9 +4,11 @@
 //! only pick among the rates it was trained on and forgets through its mode switching; the
 //! rate state integrates the evidence of the whole history and moves to an unseen unit's rate.
 //!
-//! State `[r, theta]`, measurement `r` (noise variance `r_var`). `theta` follows a random walk
-//! with variance `rate_walk_variance` per cycle (the effective rate drifts when the unit's
-//! growth law differs in shape from the GP's). Allocation-free like [`super::gp`].
+//! State `[r, theta_0, .., theta_{NX-2}]`: the log rate scale is a polynomial in the damage,
+//! `theta(r) = theta_0 + theta_1 (r - pivot) + ..`; with NX = 2 a constant rate, with NX = 3 a
+//! tilt as well (a unit whose growth accelerates more, or less, than the GP's training units).
+//! Measurement `r` (noise variance `r_var`). The `theta` entries follow a random walk with
+//! variance `rate_walk_variance` per cycle each. Allocation-free like [`super::gp`].
 
 use super::gp::{GaussianProcess, GpPrediction};
 use crate::error::Error;
@@ -16,7 +18,7 @@ use crate::model::{Model, Observe, Stochastic, gaussian_log_likelihood};
 use crate::random::standard_normal;
 use crate::real::{Real, all_finite, cast};
 use crate::safeguard::Flags;
-use nalgebra::{Matrix1, Matrix2, SVector, Vector1, Vector2};
+use nalgebra::{Matrix1, SMatrix, SVector, Vector1};
 use rand_core::Rng;
 
 /// Largest `|theta|` the transition uses (a scale of `e^8`, about 3000, is far outside any
@@ -29,25 +31,33 @@ impl<const D: usize, const NU: usize> InputSize<D, NU> {
     const OK: () = assert!(D == NU + 1, "GP input size D must equal 1 + NU");
 }
 
-/// Transition `[r, theta] -> [r + e^theta mu(r, u), theta]` with the GP's mean `mu`.
+/// Transition `[r, theta] -> [r + e^theta(r) mu(r, u), theta]` with the GP's mean `mu`.
 #[derive(Clone, Copy, Debug)]
 pub struct RateScaledTransition<'a, T: Real, const D: usize, const M: usize> {
     pub gp: &'a GaussianProcess<T, D, M>,
     /// Standard deviation of the measured `r` (for [`Stochastic::log_likelihood`]).
     pub measurement_std: T,
+    /// Damage at which `theta_0` is the log rate (the tilt terms vanish there).
+    pub pivot: T,
 }
 
 impl<T: Real, const D: usize, const M: usize> RateScaledTransition<'_, T, D, M> {
-    /// `e^theta` with `theta` clamped to `+-MAX_LOG_RATE`.
-    pub fn scale(theta: T) -> T {
+    /// `e^theta(r)` with the exponent clamped to `+-MAX_LOG_RATE`.
+    pub fn scale<const NX: usize>(&self, x: &SVector<T, NX>) -> T {
         let bound: T = cast(MAX_LOG_RATE);
+        let d = x[0] - self.pivot;
+        let (mut theta, mut power) = (T::zero(), T::one());
+        for &c in x.iter().skip(1) {
+            theta += c * power;
+            power *= d;
+        }
         theta.max(-bound).min(bound).exp()
     }
 
     /// The GP at `(r, u)`.
-    pub fn predict<const NU: usize>(
+    pub fn predict<const NX: usize, const NU: usize>(
         &self,
-        x: &Vector2<T>,
+        x: &SVector<T, NX>,
         u: &SVector<T, NU>,
     ) -> Result<GpPrediction<T>, Error> {
         let () = InputSize::<D, NU>::OK;
@@ -60,31 +70,35 @@ impl<T: Real, const D: usize, const M: usize> RateScaledTransition<'_, T, D, M> 
 }
 
 /// A non-finite state: the filter reports [`Error::NonFiniteState`] when the GP rejects a query.
-fn diverged<T: Real>() -> Vector2<T> {
-    Vector2::repeat(T::MAX_FINITE * cast(2.0))
+fn diverged<T: Real, const NX: usize>() -> SVector<T, NX> {
+    SVector::repeat(T::MAX_FINITE * cast(2.0))
 }
 
-impl<T: Real, const D: usize, const M: usize, const NU: usize> Model<T, 2, NU>
+impl<T: Real, const D: usize, const M: usize, const NX: usize, const NU: usize> Model<T, NX, NU>
     for RateScaledTransition<'_, T, D, M>
 {
-    fn step(&self, x: &Vector2<T>, u: &SVector<T, NU>, _dt: T) -> Vector2<T> {
+    fn step(&self, x: &SVector<T, NX>, u: &SVector<T, NU>, _dt: T) -> SVector<T, NX> {
         match self.predict(x, u) {
-            Ok(p) => Vector2::new(x[0] + Self::scale(x[1]) * p.mean, x[1]),
+            Ok(p) => {
+                let mut next = *x;
+                next[0] += self.scale(x) * p.mean;
+                next
+            }
             Err(_) => diverged(),
         }
     }
 }
 
-impl<T: Real, const D: usize, const M: usize, const NU: usize> Observe<T, 2, NU, 1>
-    for RateScaledTransition<'_, T, D, M>
+impl<T: Real, const D: usize, const M: usize, const NX: usize, const NU: usize>
+    Observe<T, NX, NU, 1> for RateScaledTransition<'_, T, D, M>
 {
-    fn observe(&self, x: &Vector2<T>, _u: &SVector<T, NU>) -> Vector1<T> {
+    fn observe(&self, x: &SVector<T, NX>, _u: &SVector<T, NU>) -> Vector1<T> {
         Vector1::new(x[0])
     }
 }
 
-impl<T: Real, const D: usize, const M: usize, const NU: usize> Stochastic<T, 2, NU>
-    for RateScaledTransition<'_, T, D, M>
+impl<T: Real, const D: usize, const M: usize, const NX: usize, const NU: usize>
+    Stochastic<T, NX, NU> for RateScaledTransition<'_, T, D, M>
 {
     fn measurement_len(&self) -> usize {
         1
@@ -95,21 +109,23 @@ impl<T: Real, const D: usize, const M: usize, const NU: usize> Stochastic<T, 2, 
     /// propagated sample is the one drawn from the posterior).
     fn sample_step<R: Rng + ?Sized>(
         &self,
-        x: &Vector2<T>,
+        x: &SVector<T, NX>,
         u: &SVector<T, NU>,
         _dt: T,
         rng: &mut R,
-    ) -> Vector2<T> {
+    ) -> SVector<T, NX> {
         match self.predict(x, u) {
             Ok(p) => {
                 let increment = p.mean + p.variance().sqrt() * standard_normal::<T, R>(rng);
-                Vector2::new(x[0] + Self::scale(x[1]) * increment, x[1])
+                let mut next = *x;
+                next[0] += self.scale(x) * increment;
+                next
             }
             Err(_) => diverged(),
         }
     }
 
-    fn log_likelihood(&self, x: &Vector2<T>, _u: &SVector<T, NU>, y: &[T]) -> T {
+    fn log_likelihood(&self, x: &SVector<T, NX>, _u: &SVector<T, NU>, y: &[T]) -> T {
         gaussian_log_likelihood(y, &[x[0]], &[self.measurement_std])
     }
 }
@@ -126,22 +142,33 @@ pub struct RateScaledReport<T: Real> {
     pub flags: Flags,
 }
 
-/// The GP-UKF over `[r, theta]` (Table 2 of Anger et al. with the augmented rate state).
+/// The GP-UKF over `[r, theta]` (Table 2 of Anger et al. with the augmented rate state);
+/// `NS = 2 NX + 1` sigma points.
 #[derive(Clone, Debug)]
-pub struct RateScaledGpUkf<'a, T: Real, const NU: usize, const D: usize, const M: usize> {
-    ukf: Ukf<T, 2, 5>,
+pub struct RateScaledGpUkf<
+    'a,
+    T: Real,
+    const NX: usize,
+    const NU: usize,
+    const D: usize,
+    const M: usize,
+    const NS: usize,
+> {
+    ukf: Ukf<T, NX, NS>,
     transition: RateScaledTransition<'a, T, D, M>,
     r_var: T,
     rate_walk_variance: T,
 }
 
-impl<'a, T: Real, const NU: usize, const D: usize, const M: usize> RateScaledGpUkf<'a, T, NU, D, M> {
+impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usize, const NS: usize>
+    RateScaledGpUkf<'a, T, NX, NU, D, M, NS>
+{
     /// Prior `N(x0, p0)` over `[r, theta]` (the `theta` prior is the spread of rates over the
     /// training units), measurement noise variance `r_var`, rate random walk variance per cycle.
     pub fn new(
         transition: RateScaledTransition<'a, T, D, M>,
-        x0: Vector2<T>,
-        p0: Matrix2<T>,
+        x0: SVector<T, NX>,
+        p0: SMatrix<T, NX, NX>,
         r_var: T,
         rate_walk_variance: T,
         params: SigmaParams<T>,
@@ -152,7 +179,7 @@ impl<'a, T: Real, const NU: usize, const D: usize, const M: usize> RateScaledGpU
         if !(rate_walk_variance.finite() && rate_walk_variance >= T::zero()) {
             return Err(Error::InvalidParameter("rate walk variance"));
         }
-        let ukf = Ukf::new(x0, p0, Matrix2::zeros(), params)?;
+        let ukf = Ukf::new(x0, p0, SMatrix::zeros(), params)?;
         Ok(Self {
             ukf,
             transition,
@@ -161,10 +188,10 @@ impl<'a, T: Real, const NU: usize, const D: usize, const M: usize> RateScaledGpU
         })
     }
 
-    pub fn state(&self) -> &Vector2<T> {
+    pub fn state(&self) -> &SVector<T, NX> {
         self.ukf.state()
     }
-    pub fn covariance(&self) -> &Matrix2<T> {
+    pub fn covariance(&self) -> &SMatrix<T, NX, NX> {
         self.ukf.covariance()
     }
     pub fn transition(&self) -> &RateScaledTransition<'a, T, D, M> {
@@ -189,13 +216,9 @@ impl<'a, T: Real, const NU: usize, const D: usize, const M: usize> RateScaledGpU
         // Q from the GP variance at the prior mean, stretched like the mean.
         let x = *self.ukf.state();
         let p = self.transition.predict(&x, u)?;
-        let scale = RateScaledTransition::<T, D, M>::scale(x[1]);
-        let q = Matrix2::new(
-            scale * scale * p.variance(),
-            T::zero(),
-            T::zero(),
-            self.rate_walk_variance,
-        );
+        let scale = self.transition.scale(&x);
+        let mut q = SMatrix::<T, NX, NX>::identity() * self.rate_walk_variance;
+        q[(0, 0)] = scale * scale * p.variance();
         let mut ukf = self.ukf.clone();
         ukf.set_process_noise(q)?;
         let mut flags = ukf.predict(&self.transition, u, T::one())?;
@@ -218,18 +241,18 @@ impl<'a, T: Real, const NU: usize, const D: usize, const M: usize> RateScaledGpU
     }
 }
 
-impl<T: Real, const NU: usize, const D: usize, const M: usize> ModeFilter<T, 2>
-    for RateScaledGpUkf<'_, T, NU, D, M>
+impl<T: Real, const NX: usize, const NU: usize, const D: usize, const M: usize, const NS: usize>
+    ModeFilter<T, NX> for RateScaledGpUkf<'_, T, NX, NU, D, M, NS>
 {
     type Input = SVector<T, NU>;
 
-    fn mode_state(&self) -> Vector2<T> {
+    fn mode_state(&self) -> SVector<T, NX> {
         *self.ukf.state()
     }
-    fn mode_covariance(&self) -> Matrix2<T> {
+    fn mode_covariance(&self) -> SMatrix<T, NX, NX> {
         *self.ukf.covariance()
     }
-    fn reinitialise(&mut self, x: &Vector2<T>, p: &Matrix2<T>) -> Result<(), Error> {
+    fn reinitialise(&mut self, x: &SVector<T, NX>, p: &SMatrix<T, NX, NX>) -> Result<(), Error> {
         let mut ukf = self.ukf.clone();
         ukf.set_state(*x)?;
         ukf.set_covariance(*p)?;
@@ -246,6 +269,7 @@ mod tests {
     use super::*;
     use crate::filter::ukf::SigmaParams;
     use crate::learn::gp::{StateThreshold, sample_rul};
+    use nalgebra::{Matrix2, Vector2};
     use rand_core::SeedableRng;
     use rand_xoshiro::Xoshiro256PlusPlus;
 
@@ -263,11 +287,12 @@ mod tests {
         .unwrap()
     }
 
-    fn filter(gp: &GaussianProcess<f64, 2, 1>) -> RateScaledGpUkf<'_, f64, 1, 2, 1> {
+    fn filter(gp: &GaussianProcess<f64, 2, 1>) -> RateScaledGpUkf<'_, f64, 2, 1, 2, 1, 5> {
         RateScaledGpUkf::new(
             RateScaledTransition {
                 gp,
                 measurement_std: 0.02,
+                pivot: 0.5,
             },
             Vector2::new(0.0, 0.0),
             Matrix2::new(4e-4, 0.0, 0.0, 0.25),
@@ -293,7 +318,7 @@ mod tests {
         let theta = f.state()[1];
         assert!((theta - 1.5f64.ln()).abs() < 0.05, "theta {theta}");
         // True RUL to r = 1 from r = 0.6: 0.4 / 0.015 = 26.7 cycles.
-        let mut states = [Vector2::zeros(); 100];
+        let mut states = [Vector2::<f64>::zeros(); 100];
         let mut times = [0.0; 100];
         sample_rul(
             f.transition(),
@@ -339,13 +364,13 @@ mod tests {
         assert_eq!((*f.state(), *f.covariance()), before);
         // A wild rate is clamped, not overflowed.
         let t = f.transition();
-        let x = <RateScaledTransition<'_, f64, 2, 1> as Model<f64, 2, 1>>::step(
+        let x: Vector2<f64> = <RateScaledTransition<'_, f64, 2, 1> as Model<f64, 2, 1>>::step(
             t,
             &Vector2::new(0.5, 1e6),
             &Vector1::new(0.5),
             1.0,
         );
         assert!(x.iter().all(|v| v.is_finite()));
-        assert!(RateScaledGpUkf::<f64, 1, 2, 1>::new(*t, Vector2::zeros(), Matrix2::identity(), -1.0, 0.0, SigmaParams::default()).is_err());
+        assert!(RateScaledGpUkf::<f64, 2, 1, 2, 1, 5>::new(*t, Vector2::zeros(), Matrix2::identity(), -1.0, 0.0, SigmaParams::default()).is_err());
     }
 }
