@@ -1,13 +1,13 @@
 //! Per-prediction dump of the bearing campaign's IMM of 8 GP-UKFs, for diagnosing where in life
 //! the alpha band is missed. Usage:
 //! cargo run --release -p prognos-sim --example bearing_diagnose -- [first_seed] [trials]
-//!     [imm8 | pooled-rate | imm8-rate] [rate walk variance] > out.csv
+//!     [imm8 | pooled-rate | pooled-tilt | imm8-rate] [rate walk variance] > out.csv
 use prognos_sim::bearing::prognosis::{
     BearingGp, PrognosisSettings, RatePrior, prognose, prognose_rate_scaled,
 };
+use prognos_sim::bearing::tables::{RATE_PIVOT, rate_state_prior};
 use prognos_sim::bearing::train::{Dataset, GP_POINTS, feature_noise_variance, rate_prior, train};
 use prognos_sim::bearing::trial::{Trial, TrialGenerator};
-use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 
 fn main() -> anyhow::Result<()> {
@@ -33,34 +33,17 @@ fn main() -> anyhow::Result<()> {
         .collect::<anyhow::Result<_>>()?;
     let g = |i: usize| &*gps[i];
     let pooled = train(&Dataset::from_trials(&refs), GP_POINTS)?.to_core::<GP_POINTS>()?;
-    let pivot = 0.5;
-    let prior2 = |gp: &BearingGp| -> anyhow::Result<RatePrior<2>> {
-        let (th, mean, cov) = rate_prior::<2>(gp, &refs, pivot, 0.0)?;
-        eprintln!("thetas {th:?} mean {mean:?} cov {cov:?}");
-        Ok(RatePrior {
-            mean: SVector::from([0.0, mean[0]]),
-            covariance: SMatrix::from_diagonal(&SVector::from([0.0, cov[0][0]])),
-            pivot,
-        })
-    };
-    let prior3 = |gp: &BearingGp| -> anyhow::Result<RatePrior<3>> {
-        let (th, mean, cov) = rate_prior::<3>(gp, &refs, pivot, 0.0)?;
-        eprintln!("thetas {th:?} mean {mean:?} cov {cov:?}");
-        let mut c = SMatrix::<f64, 3, 3>::zeros();
-        for i in 0..2 {
-            for j in 0..2 {
-                c[(i + 1, j + 1)] = cov[i][j];
-            }
-        }
-        Ok(RatePrior {
-            mean: SVector::from([0.0, mean[0], mean[1]]),
-            covariance: c,
-            pivot,
-        })
-    };
+    let training = &refs;
+    let prior2 = |gp: &BearingGp| rate_state_prior::<2>(gp, training);
+    let prior3 = |gp: &BearingGp| rate_state_prior::<3>(gp, training);
+    let fit = rate_prior::<3>(&pooled, &refs, RATE_PIVOT, 0.0)?;
+    eprintln!("pooled rate + tilt per trial {:?}", fit.per_trial);
     let pooled2 = prior2(&pooled)?;
     let pooled3 = prior3(&pooled)?;
-    let priors: Vec<RatePrior<2>> = gps.iter().map(|g| prior2(g)).collect::<anyhow::Result<_>>()?;
+    let priors: Vec<RatePrior<2>> = gps
+        .iter()
+        .map(|g| prior2(g))
+        .collect::<anyhow::Result<_>>()?;
     let rows: Vec<String> = test_set
         .par_iter()
         .map(|t| {

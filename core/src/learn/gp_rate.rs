@@ -31,6 +31,21 @@ impl<const D: usize, const NU: usize> InputSize<D, NU> {
     const OK: () = assert!(D == NU + 1, "GP input size D must equal 1 + NU");
 }
 
+/// Compile-time check that the state holds `r` and at least one log-rate term.
+struct StateSize<const NX: usize>;
+impl<const NX: usize> StateSize<NX> {
+    const OK: () = assert!(NX >= 2, "the rate-scaled state is [r, theta_0, ..]");
+}
+
+/// The feature entry `r` of the state.
+fn feature<T: Real, const NX: usize>(x: &SVector<T, NX>) -> T {
+    let () = StateSize::<NX>::OK;
+    x.iter()
+        .next()
+        .copied()
+        .unwrap_or(T::MAX_FINITE * cast(2.0))
+}
+
 /// Transition `[r, theta] -> [r + e^theta(r) mu(r, u), theta]` with the GP's mean `mu`.
 #[derive(Clone, Copy, Debug)]
 pub struct RateScaledTransition<'a, T: Real, const D: usize, const M: usize> {
@@ -45,7 +60,7 @@ impl<T: Real, const D: usize, const M: usize> RateScaledTransition<'_, T, D, M> 
     /// `e^theta(r)` with the exponent clamped to `+-MAX_LOG_RATE`.
     pub fn scale<const NX: usize>(&self, x: &SVector<T, NX>) -> T {
         let bound: T = cast(MAX_LOG_RATE);
-        let d = x[0] - self.pivot;
+        let d = feature(x) - self.pivot;
         let (mut theta, mut power) = (T::zero(), T::one());
         for &c in x.iter().skip(1) {
             theta += c * power;
@@ -62,8 +77,11 @@ impl<T: Real, const D: usize, const M: usize> RateScaledTransition<'_, T, D, M> 
     ) -> Result<GpPrediction<T>, Error> {
         let () = InputSize::<D, NU>::OK;
         let mut input = SVector::<T, D>::zeros();
-        for (dst, src) in input.iter_mut().zip(core::iter::once(&x[0]).chain(u.iter())) {
-            *dst = *src;
+        for (dst, src) in input
+            .iter_mut()
+            .zip(core::iter::once(feature(x)).chain(u.iter().copied()))
+        {
+            *dst = src;
         }
         self.gp.predict(&input)
     }
@@ -81,7 +99,9 @@ impl<T: Real, const D: usize, const M: usize, const NX: usize, const NU: usize> 
         match self.predict(x, u) {
             Ok(p) => {
                 let mut next = *x;
-                next[0] += self.scale(x) * p.mean;
+                if let Some(r) = next.get_mut(0) {
+                    *r += self.scale(x) * p.mean;
+                }
                 next
             }
             Err(_) => diverged(),
@@ -93,7 +113,7 @@ impl<T: Real, const D: usize, const M: usize, const NX: usize, const NU: usize>
     Observe<T, NX, NU, 1> for RateScaledTransition<'_, T, D, M>
 {
     fn observe(&self, x: &SVector<T, NX>, _u: &SVector<T, NU>) -> Vector1<T> {
-        Vector1::new(x[0])
+        Vector1::new(feature(x))
     }
 }
 
@@ -118,7 +138,9 @@ impl<T: Real, const D: usize, const M: usize, const NX: usize, const NU: usize>
             Ok(p) => {
                 let increment = p.mean + p.variance().sqrt() * standard_normal::<T, R>(rng);
                 let mut next = *x;
-                next[0] += self.scale(x) * increment;
+                if let Some(r) = next.get_mut(0) {
+                    *r += self.scale(x) * increment;
+                }
                 next
             }
             Err(_) => diverged(),
@@ -126,7 +148,7 @@ impl<T: Real, const D: usize, const M: usize, const NX: usize, const NU: usize>
     }
 
     fn log_likelihood(&self, x: &SVector<T, NX>, _u: &SVector<T, NU>, y: &[T]) -> T {
-        gaussian_log_likelihood(y, &[x[0]], &[self.measurement_std])
+        gaussian_log_likelihood(y, &[feature(x)], &[self.measurement_std])
     }
 }
 
@@ -218,13 +240,15 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         let p = self.transition.predict(&x, u)?;
         let scale = self.transition.scale(&x);
         let mut q = SMatrix::<T, NX, NX>::identity() * self.rate_walk_variance;
-        q[(0, 0)] = scale * scale * p.variance();
+        if let Some(q_rr) = q.get_mut((0, 0)) {
+            *q_rr = scale * scale * p.variance();
+        }
         let mut ukf = self.ukf.clone();
         ukf.set_process_noise(q)?;
         let mut flags = ukf.predict(&self.transition, u, T::one())?;
         let report = ukf.update(&self.transition, u, z, &Matrix1::new(self.r_var))?;
         flags.insert(report.flags);
-        let s = report.innovation_cov[(0, 0)];
+        let s = report.innovation_cov.x;
         if !(s > T::zero()) {
             return Err(Error::NotPositiveDefinite);
         }
@@ -232,7 +256,7 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         let log_likelihood = -(report.nis + s.ln() + two_pi.ln()) * cast(0.5);
         self.ukf = ukf;
         Ok(RateScaledReport {
-            innovation: report.innovation[0],
+            innovation: report.innovation.x,
             innovation_variance: s,
             log_likelihood,
             extrapolating: p.extrapolating,
@@ -371,6 +395,16 @@ mod tests {
             1.0,
         );
         assert!(x.iter().all(|v| v.is_finite()));
-        assert!(RateScaledGpUkf::<f64, 2, 1, 2, 1, 5>::new(*t, Vector2::zeros(), Matrix2::identity(), -1.0, 0.0, SigmaParams::default()).is_err());
+        assert!(
+            RateScaledGpUkf::<f64, 2, 1, 2, 1, 5>::new(
+                *t,
+                Vector2::zeros(),
+                Matrix2::identity(),
+                -1.0,
+                0.0,
+                SigmaParams::default()
+            )
+            .is_err()
+        );
     }
 }

@@ -5,8 +5,8 @@ use super::prognosis::{
     BearingGp, PrognosisSettings, RatePrior, TrialMetrics, metrics, prognose, prognose_rate_scaled,
 };
 use super::train::{Dataset, GP_POINTS, feature_noise_variance, rate_prior, train};
-use nalgebra::{SMatrix, SVector};
 use super::trial::{Trial, TrialGenerator};
+use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 use std::fmt::Write as _;
 
@@ -106,7 +106,8 @@ pub fn rate_state_prior<const NX: usize>(
     gp: &BearingGp,
     training: &[&Trial],
 ) -> anyhow::Result<RatePrior<NX>> {
-    let (_, mean, cov) = rate_prior::<NX>(gp, training, RATE_PIVOT, 0.0)?;
+    let fit = rate_prior::<NX>(gp, training, RATE_PIVOT, 0.0)?;
+    let (mean, cov) = (&fit.mean, &fit.covariance);
     let mut m = SVector::<f64, NX>::zeros();
     let mut c = SMatrix::<f64, NX, NX>::zeros();
     for i in 0..NX - 1 {
@@ -240,9 +241,8 @@ pub fn tables(generator: &TrialGenerator, campaign: CampaignConfig) -> anyhow::R
     let pooled_rows = eval(&|t| run([&*pooled], t, &c_settings))?;
     let rate_prior2 = rate_state_prior::<2>(&pooled, &train_refs)?;
     let rate_prior3 = rate_state_prior::<3>(&pooled, &train_refs)?;
-    let metrics_of = |p: anyhow::Result<_>| {
-        metrics(&p?).ok_or_else(|| anyhow::anyhow!("no predictions"))
-    };
+    let metrics_of =
+        |p: anyhow::Result<_>| metrics(&p?).ok_or_else(|| anyhow::anyhow!("no predictions"));
     let rate_rows = eval(&|t| {
         metrics_of(prognose_rate_scaled::<2, 5, 1>(
             [(&*pooled, rate_prior2)],

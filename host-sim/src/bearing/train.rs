@@ -68,6 +68,15 @@ pub fn feature_noise_variance(trials: &[&Trial]) -> f64 {
     s / n.max(1) as f64
 }
 
+/// The training units' log-rate terms and the prior they give (see [`rate_prior`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RatePriorFit {
+    /// `[theta_0, ..]` of each training unit.
+    pub per_trial: Vec<Vec<f64>>,
+    pub mean: Vec<f64>,
+    pub covariance: Vec<Vec<f64>>,
+}
+
 /// Log-rate polynomial of each training unit relative to `gp` and the prior it gives for an
 /// unseen unit. A unit's course (low-passed) is cut at `pivot` into a low and a high part; in
 /// each, `ln(sum dr / sum mu(r, du))` is how much faster the unit went than the GP's mean
@@ -80,7 +89,7 @@ pub fn rate_prior<const NX: usize>(
     trials: &[&Trial],
     pivot: f64,
     min_variance: f64,
-) -> anyhow::Result<(Vec<Vec<f64>>, Vec<f64>, Vec<Vec<f64>>)> {
+) -> anyhow::Result<RatePriorFit> {
     anyhow::ensure!((2..=3).contains(&NX), "rate prior for NX = 2 or 3");
     let mut all = Vec::with_capacity(trials.len());
     for t in trials {
@@ -131,7 +140,11 @@ pub fn rate_prior<const NX: usize>(
     for (i, row) in cov.iter_mut().enumerate() {
         row[i] = row[i].max(min_variance);
     }
-    Ok((all, mean, cov))
+    Ok(RatePriorFit {
+        per_trial: all,
+        mean,
+        covariance: cov,
+    })
 }
 
 /// Hyperparameters of the SE-ARD GP.
