@@ -121,6 +121,12 @@ pub struct WheelPlant<T: Real> {
 impl<T: Real> WheelPlant<T> {
     /// The wheel at its steady state for the command at the initial temperature.
     pub fn new() -> Self {
+        Self::with_seed(PLANT_SEED)
+    }
+
+    /// As [`WheelPlant::new`] with another seed of the sensor and gauge noise (host
+    /// campaigns over seeds).
+    pub fn with_seed(seed: u64) -> Self {
         let params = WheelParams::<T>::ithaco_type_a();
         let (current, speed) =
             params.unlimited_steady_state(cast(COMMAND_V), Self::temperature_at(0));
@@ -133,7 +139,7 @@ impl<T: Real> WheelPlant<T> {
             consumed: T::zero(),
             interval_consumed: T::zero(),
             gauge_ml: T::zero(),
-            rng: Xoshiro256PlusPlus::seed_from_u64(PLANT_SEED),
+            rng: Xoshiro256PlusPlus::seed_from_u64(seed),
         }
     }
 
