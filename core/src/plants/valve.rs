@@ -216,6 +216,9 @@ pub struct ValveParams<T> {
     /// The drift is the mean of the rates at the state and one sub-step later, because
     /// explicit Euler chatters (period two, about 1.4 kPa) around a settled pressure.
     pub quiescent_rate_tol: T,
+    /// The orifice constants of `gamma`, `z`, `r_gas`, `temperature`, computed once (a
+    /// stale cache, after one of those changed, is ignored and recomputed per call).
+    pub gas_cache: GasCoefficients<T>,
 }
 
 impl<T: Real> ValveParams<T> {
@@ -247,6 +250,7 @@ impl<T: Real> ValveParams<T> {
             integrator: Integrator::SemiImplicit,
             max_substep: cast(0.01),
             quiescent_rate_tol: T::zero(),
+            gas_cache: GasCoefficients::new(cast(1.4), cast(296.0 * 293.0)),
         }
     }
 
@@ -279,6 +283,7 @@ impl<T: Real> ValveParams<T> {
             integrator: Integrator::ProgpyEuler,
             max_substep: cast(0.01),
             quiescent_rate_tol: T::zero(),
+            gas_cache: GasCoefficients::new(cast(1.4), cast::<T>(8.314 / 28.01e-3) * cast(293.0)),
         }
     }
 
@@ -313,17 +318,14 @@ impl<T: Real> ValveParams<T> {
         p * (self.v_b0 + self.a_p * x) / (self.r_gas * self.temperature)
     }
 
-    /// The gas-only constants of the orifice equation.
+    /// The gas-only constants of the orifice equation (the cached ones when `gamma`, `z`,
+    /// `r_gas` and `temperature` are still those they were computed from).
     pub fn gas_coefficients(&self) -> GasCoefficients<T> {
-        let g = self.gamma;
-        let one = T::one();
-        let two: T = cast(2.0);
         let zrt = self.z * self.r_gas * self.temperature;
-        GasCoefficients {
-            choke_ratio: ((g + one) / two).powf(g / (g - one)),
-            choked: (g / zrt * (two / (g + one)).powf((g + one) / (g - one))).sqrt(),
-            subsonic: two * g / (zrt * (g - one)),
-            inv_gamma: one / g,
+        if self.gas_cache.gamma == self.gamma && self.gas_cache.zrt == zrt {
+            self.gas_cache
+        } else {
+            GasCoefficients::new(self.gamma, zrt)
         }
     }
 
@@ -632,7 +634,12 @@ impl<T: Real> ValveParams<T> {
 
 /// Gas-only constants of the orifice equation (see [`ValveParams::gas_coefficients`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GasCoefficients<T> {
+    /// Ratio of specific heats they were computed for.
+    pub gamma: T,
+    /// `Z R T` they were computed for.
+    pub zrt: T,
     /// Upstream/downstream pressure ratio at which the flow chokes.
     pub choke_ratio: T,
     /// `sqrt(gamma / (Z R T) (2 / (gamma + 1))^((gamma + 1) / (gamma - 1)))`.
@@ -641,6 +648,43 @@ pub struct GasCoefficients<T> {
     pub subsonic: T,
     /// `1 / gamma`.
     pub inv_gamma: T,
+    /// Coefficients of `(1 - e)^(1/gamma) = sum_n series[n] e^n` (binomial series).
+    pub series: [T; SERIES_TERMS],
+}
+
+impl<T: Real> GasCoefficients<T> {
+    /// The constants for ratio of specific heats `g` and `zrt = Z R T`.
+    pub fn new(g: T, zrt: T) -> Self {
+        let one = T::one();
+        let two: T = cast(2.0);
+        Self {
+            gamma: g,
+            zrt,
+            choke_ratio: ((g + one) / two).powf(g / (g - one)),
+            choked: (g / zrt * (two / (g + one)).powf((g + one) / (g - one))).sqrt(),
+            subsonic: two * g / (zrt * (g - one)),
+            inv_gamma: one / g,
+            series: binomial_series(one / g),
+        }
+    }
+}
+
+/// Below this distance of the pressure ratio from 1 the orifice equation sums the binomial
+/// series instead of calling `powf`.
+const SERIES_RANGE: f64 = 0.05;
+/// Terms of the binomial series: the first omitted one is below 0.05^12 ~ 2e-16 relative.
+pub const SERIES_TERMS: usize = 12;
+
+/// `b[n] = binom(c, n) (-1)^n`, the coefficients of `(1 - e)^c` in powers of `e`.
+fn binomial_series<T: Real>(c: T) -> [T; SERIES_TERMS] {
+    let mut b = [T::one(); SERIES_TERMS];
+    let mut term = T::one();
+    for (n, slot) in b.iter_mut().enumerate().skip(1) {
+        // binom(c, n) (-1)^n = binom(c, n - 1) (-1)^(n-1) * (n - 1 - c) / n.
+        term = term * (cast::<T>((n - 1) as f64) - c) / cast::<T>(n as f64);
+        *slot = term;
+    }
+    b
 }
 
 /// The paper's f_g with precomputed gas constants. The non-choked bracket
@@ -658,7 +702,23 @@ fn gas_flow_with<T: Real>(gc: &GasCoefficients<T>, p1: T, p2: T, c: T, area: T) 
         c * area * up * gc.choked
     } else {
         let ratio = down / up;
-        let a = ratio.powf(gc.inv_gamma);
+        let e = T::one() - ratio;
+        // Near 1 (a settled chamber's orifice, most of a cycle) the binomial series costs a
+        // tenth of a `powf`.
+        let a = if e < cast::<T>(SERIES_RANGE) {
+            // Even and odd powers as two independent Horner chains in e^2 (half the latency).
+            let e2 = e * e;
+            let (even, odd) = gc
+                .series
+                .chunks_exact(2)
+                .rev()
+                .fold((T::zero(), T::zero()), |(ev, od), pair| {
+                    (ev * e2 + pair[0], od * e2 + pair[1])
+                });
+            even + e * odd
+        } else {
+            ratio.powf(gc.inv_gamma)
+        };
         let bracket = a * (a - ratio);
         let bracket = if bracket > T::zero() {
             bracket
