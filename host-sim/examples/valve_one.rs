@@ -64,7 +64,10 @@ fn main() {
         .step_by(5)
         .map(|(e, t)| format!("{:+.2e}", e - t))
         .collect();
-    println!("damage estimate - truth every 5 cycles: {}", errors.join(" "));
+    println!(
+        "damage estimate - truth every 5 cycles: {}",
+        errors.join(" ")
+    );
     for p in &r.predictions {
         println!(
             "  t_P {:5.1} RUL* {:6.2} median {:6.2} mean {:6.2} p01 {:6.2} RA {:6.2} RMAD {:5.2}",

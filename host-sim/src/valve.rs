@@ -16,6 +16,7 @@ use prognos_core::plants::valve::{
 };
 use prognos_core::prognose::{PredictionSettings, predict_eol, rul_distribution};
 use prognos_core::random::{standard_normal, uniform01};
+use prognos_core::{Real, cast};
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
@@ -256,6 +257,16 @@ fn magnitude(w: f64) -> f64 {
 
 /// Runs one experiment with an `N`-particle filter until the true EOL.
 pub fn run_experiment<const N: usize>(setup: &ValveSetup, exp: &Experiment) -> RunResult {
+    run_experiment_in::<f64, N>(setup, exp)
+}
+
+/// [`run_experiment`] with the filter (model, particles, weights) computing in `T` (f32 as
+/// on the target, f64 on the host). The truth plant, the metrics and the cycle-level RUL
+/// prediction stay in f64 (the posterior is converted at each prediction point).
+pub fn run_experiment_in<T: Real, const N: usize>(
+    setup: &ValveSetup,
+    exp: &Experiment,
+) -> RunResult {
     let started = std::time::Instant::now();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(exp.seed);
     let mut phase_rng = Xoshiro256PlusPlus::seed_from_u64(exp.seed ^ 0x5DEE_CE66_D1CE_4E5B);
@@ -267,22 +278,23 @@ pub fn run_experiment<const N: usize>(setup: &ValveSetup, exp: &Experiment) -> R
         process_noise.leak_rel = exp.damage_walk_rel * (SAMPLES_PER_CYCLE as f64).sqrt();
         process_noise.sliding_rel = exp.damage_walk_rel * 15f64.sqrt();
     }
-    let model = Valve {
-        params: setup.params,
+    let model = Valve::<T> {
+        params: setup.params.cast_to(),
         measurements: exp.measurements,
-        sensor_noise: exp.filter_noise,
-        process_noise,
+        sensor_noise: exp.filter_noise.cast_to(),
+        process_noise: process_noise.cast_to(),
     };
+    let to_t = |v: f64| cast::<T>(v);
 
     // Prior: damage known (nominal); each estimated wear log-uniform over one decade that
     // contains the truth at a random place; walk scaled by the order of magnitude.
     let mut walk = SVector::<f64, NX>::zeros();
-    let mut lower = SVector::<f64, NX>::repeat(-f64::MAX);
+    let mut lower = SVector::<T, NX>::repeat(-T::MAX_FINITE);
     let mut prior = [(0.0f64, 0.0f64); 5];
     for mode in &exp.estimated {
         let i = mode.wear_index();
         let w_true = exp.true_wear[i - idx::W_R];
-        lower[i] = 0.0;
+        lower[i] = T::zero();
         let reference = if w_true > 0.0 && exp.prior_override.is_none() {
             w_true
         } else {
@@ -308,16 +320,17 @@ pub fn run_experiment<const N: usize>(setup: &ValveSetup, exp: &Experiment) -> R
         }
     }
     for i in idx::R..=idx::A_EB {
-        lower[i] = 0.0;
+        lower[i] = T::zero();
     }
     let config = PfConfig {
-        random_walk_std: walk,
+        random_walk_std: walk.map(to_t),
         lower,
-        resample_threshold: 0.5,
+        resample_threshold: cast(0.5),
         ..PfConfig::default()
     };
     let x0 = setup.params.nominal_state(6000.0, 48000.0, [0.0; 5]);
-    let mut pf = Box::new(ParticleFilter::<f64, NX, N>::new(x0, config).expect("valid config"));
+    let mut pf =
+        Box::new(ParticleFilter::<T, NX, N>::new(x0.map(to_t), config).expect("valid config"));
     pf.init_with(&mut rng, |_, r| {
         let mut x = x0;
         for (k, (lo, hi)) in prior.iter().enumerate() {
@@ -328,7 +341,7 @@ pub fn run_experiment<const N: usize>(setup: &ValveSetup, exp: &Experiment) -> R
                 x[idx::W_R + k] = hi * u;
             }
         }
-        x
+        x.map(to_t)
     })
     .expect("finite prior");
 
@@ -343,7 +356,7 @@ pub fn run_experiment<const N: usize>(setup: &ValveSetup, exp: &Experiment) -> R
     let mut pending: Vec<f64> = exp.prediction_points.clone();
     pending.sort_by(|a, b| a.partial_cmp(b).unwrap());
     let mut pending_predictions: Vec<(f64, Vec<f64>, Vec<f64>)> = Vec::new();
-    let mut buf = vec![(0.0, 0.0); N];
+    let mut buf = vec![(T::zero(), T::zero()); N];
 
     let max_cycles = 400usize;
     let mut true_eol = f64::NAN;
@@ -364,46 +377,50 @@ pub fn run_experiment<const N: usize>(setup: &ValveSetup, exp: &Experiment) -> R
                 pending_predictions.push((t_p, times, weights));
             }
             let u = cycle_input(&setup.params, k);
+            let u_t = u.map(to_t);
             let mut dt = SAMPLE_DT;
             if exp.asynchronous_commands && (k == 0 || k == SAMPLES_PER_CYCLE / 2) {
                 // The command arrives `lead` into this sample interval: the previous input
                 // holds until then (the filter only predicts over that part).
                 let lead = SAMPLE_DT * uniform01::<f64, _>(&mut phase_rng);
-                let previous = cycle_input(&setup.params, (k + SAMPLES_PER_CYCLE - 1) % SAMPLES_PER_CYCLE);
+                let previous = cycle_input(
+                    &setup.params,
+                    (k + SAMPLES_PER_CYCLE - 1) % SAMPLES_PER_CYCLE,
+                );
                 if lead > 0.0 {
                     truth.advance(&previous, lead);
-                    let _ = pf.step(&model, &previous, None, lead, &mut rng);
+                    let _ = pf.step(&model, &previous.map(to_t), None, to_t(lead), &mut rng);
                     dt -= lead;
                 }
             }
             truth.advance(&u, dt);
-            let outputs = truth.measure(&u, &mut rng);
+            let outputs = truth.measure(&u, &mut rng).map(to_t);
             let (y, n) = model.select(&outputs);
             // A step that the filter rejects leaves it unchanged; the run goes on.
-            let _ = pf.step(&model, &u, Some(&y[..n]), dt, &mut rng);
+            let _ = pf.step(&model, &u_t, Some(&y[..n]), to_t(dt), &mut rng);
             let t_now = t_cycles + 1.0 / SAMPLES_PER_CYCLE as f64;
             est_times.push(t_now);
-            let weights = pf.log_weights().map(f64::exp);
+            let weights = pf.log_weights().map(|lw| lw.as_f64().exp());
             for (est, mode) in estimates.iter_mut().zip(&exp.estimated) {
                 let i = mode.wear_index();
                 let m: f64 = pf
                     .particles()
                     .iter()
                     .zip(weights.iter())
-                    .map(|(p, w)| p[i] * w)
+                    .map(|(p, w)| p[i].as_f64() * w)
                     .sum();
                 est.push(m);
             }
         }
         {
-            let weights = pf.log_weights().map(f64::exp);
+            let weights = pf.log_weights().map(|lw| lw.as_f64().exp());
             for (k, mode) in exp.estimated.iter().enumerate() {
                 let d = mode.damage_index();
                 let m: f64 = pf
                     .particles()
                     .iter()
                     .zip(weights.iter())
-                    .map(|(p, w)| p[d] * w)
+                    .map(|(p, w)| p[d].as_f64() * w)
                     .sum();
                 damage_estimates[k].push(m);
                 true_damage[k].push(truth.state[d]);
@@ -414,7 +431,7 @@ pub fn run_experiment<const N: usize>(setup: &ValveSetup, exp: &Experiment) -> R
                 if let Some(s) =
                     pf.summary_of(mode.wear_index(), (&mut buf[..]).try_into().unwrap())
                 {
-                    *acc += s.rmad;
+                    *acc += s.rmad.as_f64();
                 }
             }
             rmad_count += 1;
@@ -490,9 +507,9 @@ pub fn run_experiment<const N: usize>(setup: &ValveSetup, exp: &Experiment) -> R
 /// RUL samples [cycles] and weights of every particle at prediction time `t_p` [cycles]
 /// (Algorithm 3 with the cycle-level model: the particle first completes its current cycle,
 /// then advances whole cycles until a damage variable is past its threshold at a cycle start).
-fn predict_rul<const N: usize>(
+fn predict_rul<T: Real, const N: usize>(
     setup: &ValveSetup,
-    pf: &ParticleFilter<f64, NX, N>,
+    pf: &ParticleFilter<T, NX, N>,
     t_p: f64,
 ) -> (Vec<f64>, Vec<f64>) {
     let model = CycleRateModel { table: setup.table };
@@ -501,7 +518,11 @@ fn predict_rul<const N: usize>(
     let states: Vec<SVector<f64, NX>> = pf
         .particles()
         .iter()
-        .map(|p| setup.table.advance_cycles(p, remaining))
+        .map(|p| {
+            setup
+                .table
+                .advance_cycles(&p.map(|v| v.as_f64()), remaining)
+        })
         .collect();
     let mut times = vec![0.0; N];
     let settings = PredictionSettings::deterministic(1.0, 5000);
@@ -516,7 +537,11 @@ fn predict_rul<const N: usize>(
         &mut times,
     );
     let rul = times.iter().map(|k| next_start + k - t_p).collect();
-    let weights = pf.log_weights().iter().map(|lw| lw.exp()).collect();
+    let weights = pf
+        .log_weights()
+        .iter()
+        .map(|lw| lw.as_f64().exp())
+        .collect();
     (rul, weights)
 }
 

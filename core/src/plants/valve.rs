@@ -296,6 +296,43 @@ impl<T: Real> ValveParams<T> {
         }
     }
 
+    /// The same parameters in another scalar type (f64 on the host, f32 on the target).
+    pub fn cast_to<U: Real>(&self) -> ValveParams<U> {
+        let c = |v: T| cast::<U>(v.as_f64());
+        let gamma = c(self.gamma);
+        let zrt = c(self.z) * c(self.r_gas) * c(self.temperature);
+        ValveParams {
+            g: c(self.g),
+            p_atm: c(self.p_atm),
+            p_supply: c(self.p_supply),
+            m: c(self.m),
+            x_o: c(self.x_o),
+            l_s: c(self.l_s),
+            a_p: c(self.a_p),
+            v_t0: c(self.v_t0),
+            v_b0: c(self.v_b0),
+            rho: c(self.rho),
+            a_v: c(self.a_v),
+            c_v: c(self.c_v),
+            r_gas: c(self.r_gas),
+            temperature: c(self.temperature),
+            gamma,
+            z: c(self.z),
+            a_s: c(self.a_s),
+            c_s: c(self.c_s),
+            c_leak: c(self.c_leak),
+            contact: match self.contact {
+                Contact::Seal { k_c } => Contact::Seal { k_c: c(k_c) },
+                Contact::HardStops => Contact::HardStops,
+            },
+            indicator_tolerance: c(self.indicator_tolerance),
+            integrator: self.integrator,
+            max_substep: c(self.max_substep),
+            quiescent_rate_tol: c(self.quiescent_rate_tol),
+            gas_cache: GasCoefficients::new(gamma, zrt),
+        }
+    }
+
     /// Pressure above the piston [Pa].
     #[inline]
     pub fn pressure_top(&self, x: T, m_top: T) -> T {
@@ -765,6 +802,19 @@ pub struct SensorNoise<T> {
     pub discrete: T,
 }
 
+impl<T: Real> SensorNoise<T> {
+    /// The same standard deviations in another scalar type.
+    pub fn cast_to<U: Real>(&self) -> SensorNoise<U> {
+        let c = |v: T| cast::<U>(v.as_f64());
+        SensorNoise {
+            x: c(self.x),
+            f: c(self.f),
+            p: c(self.p),
+            discrete: c(self.discrete),
+        }
+    }
+}
+
 impl<T: Real> Default for SensorNoise<T> {
     fn default() -> Self {
         Self {
@@ -791,6 +841,19 @@ pub struct ProcessNoise<T> {
     pub sliding_rel: T,
     /// The same for the time-driven external leaks.
     pub leak_rel: T,
+}
+
+impl<T: Real> ProcessNoise<T> {
+    /// The same standard deviations in another scalar type.
+    pub fn cast_to<U: Real>(&self) -> ProcessNoise<U> {
+        let c = |v: T| cast::<U>(v.as_f64());
+        ProcessNoise {
+            v: c(self.v),
+            mass_rel: c(self.mass_rel),
+            sliding_rel: c(self.sliding_rel),
+            leak_rel: c(self.leak_rel),
+        }
+    }
 }
 
 impl<T: Real> Default for ProcessNoise<T> {
