@@ -250,8 +250,9 @@ impl<T: Real> ValveParams<T> {
             integrator: Integrator::SemiImplicit,
             max_substep: cast(0.01),
             quiescent_rate_tol: T::zero(),
-            gas_cache: GasCoefficients::new(cast(1.4), cast(296.0 * 293.0)),
+            gas_cache: GasCoefficients::new(T::one(), T::one()),
         }
+        .with_gas_cache()
     }
 
     /// progpy 1.9.0's `PneumaticValveBase` constants: hard stops, leak coefficient 1, liquid
@@ -283,8 +284,9 @@ impl<T: Real> ValveParams<T> {
             integrator: Integrator::ProgpyEuler,
             max_substep: cast(0.01),
             quiescent_rate_tol: T::zero(),
-            gas_cache: GasCoefficients::new(cast(1.4), cast::<T>(8.314 / 28.01e-3) * cast(293.0)),
+            gas_cache: GasCoefficients::new(T::one(), T::one()),
         }
+        .with_gas_cache()
     }
 
     /// progpy's constants with the stable semi-implicit integrator: the physics the
@@ -300,7 +302,6 @@ impl<T: Real> ValveParams<T> {
     pub fn cast_to<U: Real>(&self) -> ValveParams<U> {
         let c = |v: T| cast::<U>(v.as_f64());
         let gamma = c(self.gamma);
-        let zrt = c(self.z) * c(self.r_gas) * c(self.temperature);
         ValveParams {
             g: c(self.g),
             p_atm: c(self.p_atm),
@@ -329,8 +330,9 @@ impl<T: Real> ValveParams<T> {
             integrator: self.integrator,
             max_substep: c(self.max_substep),
             quiescent_rate_tol: c(self.quiescent_rate_tol),
-            gas_cache: GasCoefficients::new(gamma, zrt),
+            gas_cache: GasCoefficients::new(gamma, U::one()),
         }
+        .with_gas_cache()
     }
 
     /// Pressure above the piston [Pa].
@@ -353,6 +355,17 @@ impl<T: Real> ValveParams<T> {
     /// Gas mass that gives pressure `p` below the piston at position `x`.
     pub fn mass_bottom_for(&self, x: T, p: T) -> T {
         p * (self.v_b0 + self.a_p * x) / (self.r_gas * self.temperature)
+    }
+
+    /// These parameters with the orifice constants cached for their gas.
+    pub fn with_gas_cache(mut self) -> Self {
+        self.gas_cache = self.fresh_gas_coefficients();
+        self
+    }
+
+    /// The orifice constants computed from `gamma`, `z`, `r_gas` and `temperature`.
+    pub fn fresh_gas_coefficients(&self) -> GasCoefficients<T> {
+        GasCoefficients::new(self.gamma, self.z * self.r_gas * self.temperature)
     }
 
     /// The gas-only constants of the orifice equation (the cached ones when `gamma`, `z`,
@@ -718,7 +731,7 @@ fn binomial_series<T: Real>(c: T) -> [T; SERIES_TERMS] {
     let mut term = T::one();
     for (n, slot) in b.iter_mut().enumerate().skip(1) {
         // binom(c, n) (-1)^n = binom(c, n - 1) (-1)^(n-1) * (n - 1 - c) / n.
-        term = term * (cast::<T>((n - 1) as f64) - c) / cast::<T>(n as f64);
+        term = term * (cast::<T>(n.saturating_sub(1) as f64) - c) / cast::<T>(n as f64);
         *slot = term;
     }
     b
@@ -745,13 +758,14 @@ fn gas_flow_with<T: Real>(gc: &GasCoefficients<T>, p1: T, p2: T, c: T, area: T) 
         let a = if e < cast::<T>(SERIES_RANGE) {
             // Even and odd powers as two independent Horner chains in e^2 (half the latency).
             let e2 = e * e;
-            let (even, odd) = gc
-                .series
-                .chunks_exact(2)
-                .rev()
-                .fold((T::zero(), T::zero()), |(ev, od), pair| {
-                    (ev * e2 + pair[0], od * e2 + pair[1])
-                });
+            let (even, odd) =
+                gc.series
+                    .chunks_exact(2)
+                    .rev()
+                    .fold((T::zero(), T::zero()), |(ev, od), pair| match pair {
+                        [b_even, b_odd] => (ev * e2 + *b_even, od * e2 + *b_odd),
+                        _ => (ev, od),
+                    });
             even + e * odd
         } else {
             ratio.powf(gc.inv_gamma)
@@ -1542,6 +1556,45 @@ impl<T: Real> crate::prognose::EndOfLife<T, NX> for DamageThresholds<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn presets_and_conversions_carry_a_valid_gas_cache() {
+        let fresh =
+            |p: &ValveParams<f64>| GasCoefficients::new(p.gamma, p.z * p.r_gas * p.temperature);
+        for p in [
+            ValveParams::<f64>::paper(),
+            ValveParams::progpy(),
+            ValveParams::progpy_stable(),
+        ] {
+            assert_eq!(p.gas_cache, fresh(&p));
+            let single = p.cast_to::<f32>();
+            assert_eq!(single.gas_cache, single.fresh_gas_coefficients());
+        }
+        // A changed gas invalidates the cache: the constants follow the new gamma.
+        let helium = ValveParams {
+            gamma: 1.66,
+            ..ValveParams::<f64>::progpy()
+        };
+        assert_eq!(helium.gas_coefficients(), fresh(&helium));
+        assert!(helium.gas_coefficients() != helium.gas_cache);
+    }
+
+    #[test]
+    fn binomial_series_matches_powf_near_one() {
+        let p = ValveParams::<f64>::progpy();
+        let gc = p.gas_coefficients();
+        let mut worst = 0.0f64;
+        for i in 1..=1000 {
+            let ratio = 1.0 - 0.0499 * f64::from(i) / 1000.0;
+            // Both branches through the public flow: series inside the range, powf at its edge.
+            let up = 3.0e5;
+            let series = gas_flow_with(&gc, up, ratio * up, 1.0, 1.0e-5);
+            let a = ratio.powf(1.0 / p.gamma);
+            let exact = 1.0e-5 * up * (gc.subsonic * a * (a - ratio)).sqrt();
+            worst = worst.max(((series - exact) / exact).abs());
+        }
+        assert!(worst < 1e-11, "relative error {worst}");
+    }
 
     #[test]
     fn gas_flow_is_antisymmetric_and_continuous_at_choke() {
