@@ -8,7 +8,7 @@ use super::resample::{Resampling, apply_counts, offspring_counts};
 use crate::error::{Error, check_dt};
 use crate::model::Stochastic;
 use crate::random::standard_normal;
-use crate::real::{Real, all_finite, cast};
+use crate::real::{Real, all_finite, cast, zero_vector};
 use crate::safeguard::{Flags, log_sum_exp};
 use crate::stats::{Summary, summarise};
 use nalgebra::{SMatrix, SVector};
@@ -47,6 +47,17 @@ impl<T: Real, const NX: usize> Default for PfConfig<T, NX> {
 }
 
 impl<T: Real, const NX: usize> PfConfig<T, NX> {
+    /// All-zero settings of a [`ParticleFilter::UNSET`] placeholder (not a usable configuration:
+    /// bounds `[0, 0]`).
+    pub const UNSET: Self = Self {
+        resampling: Resampling::Systematic,
+        resample_threshold: T::ZERO,
+        random_walk_std: zero_vector(),
+        roughening: zero_vector(),
+        lower: zero_vector(),
+        upper: zero_vector(),
+    };
+
     fn validate(&self) -> Result<(), Error> {
         if !(self.resample_threshold >= T::zero() && self.resample_threshold <= T::one()) {
             return Err(Error::InvalidParameter("resample_threshold"));
@@ -116,21 +127,37 @@ impl<T: Real, const NX: usize, const N: usize> core::fmt::Debug for ParticleFilt
 impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
     const NONEMPTY: () = assert!(N > 0 && NX > 0, "need at least one particle and one state");
 
+    /// An all-zero placeholder for static storage, built at compile time so that a large
+    /// filter never passes through the stack: [`ParticleFilter::reset`] it in place before use.
+    pub const UNSET: Self = Self {
+        particles: [zero_vector(); N],
+        log_weights: [T::ZERO; N],
+        scratch: [T::ZERO; N],
+        counts: [0; N],
+        config: PfConfig::UNSET,
+    };
+
     /// A filter with all particles at `x0` and uniform weights.
     pub fn new(x0: SVector<T, NX>, config: PfConfig<T, NX>) -> Result<Self, Error> {
+        let mut filter = Self::UNSET;
+        filter.reset(x0, config)?;
+        Ok(filter)
+    }
+
+    /// Re-initialises the filter in place, as [`ParticleFilter::new`] would build it: all
+    /// particles at `x0`, uniform weights. Bad settings are an error and change nothing.
+    pub fn reset(&mut self, x0: SVector<T, NX>, config: PfConfig<T, NX>) -> Result<(), Error> {
         let () = Self::NONEMPTY;
         config.validate()?;
         if !all_finite(x0.as_slice()) {
             return Err(Error::InvalidParameter("x0"));
         }
-        let uniform = -cast::<T>(N as f64).ln();
-        Ok(Self {
-            particles: [x0; N],
-            log_weights: [uniform; N],
-            scratch: [T::zero(); N],
-            counts: [0; N],
-            config,
-        })
+        self.particles.fill(x0);
+        self.reset_weights();
+        self.scratch.fill(T::zero());
+        self.counts.fill(0);
+        self.config = config;
+        Ok(())
     }
 
     /// Re-initialises particles from independent Gaussians `mean + std * z`, clamped to the
@@ -175,7 +202,7 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
 
     fn reset_weights(&mut self) {
         let uniform = -cast::<T>(N as f64).ln();
-        self.log_weights = [uniform; N];
+        self.log_weights.fill(uniform);
     }
 
     /// The particles.
