@@ -1,6 +1,6 @@
 //! One valve prognostics experiment (N = 500), for tuning and timing:
 //! `cargo run --release -p prognos-sim --example valve_one -- <mode 0-4> <set 0-3> <seed>
-//! [truth step us] [filter step us] [asynchronous 0/1] [discrete noise /100] [walk /1e-5]`.
+//! [truth step us] [filter step us] [asynchronous 0/1] [discrete noise /100] [walk /1e-5] [damage walk /100]`.
 
 use prognos_core::plants::valve::{DamageMode, MeasurementSet};
 use prognos_sim::valve::{ValveSetup, run_experiment, table2_experiment};
@@ -24,6 +24,10 @@ fn main() {
         );
     }
     let mut exp = table2_experiment(&setup, mode, set, seed);
+    if let Some(w) = args.get(8) {
+        // Optional damage random walk per cycle relative to one cycle's increment, in 1/100.
+        exp.damage_walk_rel = *w as f64 * 0.01;
+    }
     if let Some(w) = args.get(7) {
         // Optional wear random walk relative to its magnitude, in 1e-5.
         exp.random_walk_rel = *w as f64 * 1e-5;
