@@ -1,5 +1,5 @@
-//! Pneumatic-valve prognostics (Daigle & Goebel 2011, section 6): a fine-resolution truth
-//! plant with sensors, joint state-parameter estimation with the core SIR particle filter,
+//! Pneumatic-valve prognostics (Daigle & Goebel 2011, section 6): a truth plant without
+//! shortcuts, with sensors; joint state-parameter estimation with the core SIR particle filter,
 //! EOL/RUL prediction in cycles, and the Table 2 / Table 3 campaigns.
 //!
 //! Speed scheme (see `docs/deviations.md`): the filter samples every 0.1 s and its model
@@ -30,7 +30,7 @@ pub const TRUTH_SUBSTEP: f64 = 0.01;
 /// Samples per 30 s cycle.
 pub const SAMPLES_PER_CYCLE: usize = 300;
 
-/// The truth plant: the estimation physics at a 2 ms step (no shortcuts), with sensors.
+/// The truth plant: the estimation physics without shortcuts (step `TRUTH_SUBSTEP`), with sensors.
 #[derive(Clone, Debug)]
 pub struct TruthValve {
     pub params: ValveParams<f64>,
