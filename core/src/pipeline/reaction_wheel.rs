@@ -16,9 +16,9 @@ use crate::error::Error;
 use crate::filter::adaptive::{AdaptiveConfig, AdaptiveFilter, Method};
 use crate::filter::particle::{PfConfig, PfReport};
 use crate::plants::lubricant_kalman::{LossKalman, LossKalmanConfig};
+use crate::plants::lubricant_two_step::{TwoStepConfig, TwoStepLoss};
 use crate::plants::reaction_wheel::{
-    BETA_UNIT, ExposureAccumulator, IntervalExposure, LossAccumulationModel, LossRateModel,
-    LossRatioModel, WheelTemperatureModel,
+    BETA_UNIT, ExposureAccumulator, IntervalExposure, LossAccumulationModel, WheelTemperatureModel,
 };
 use crate::prognose::eol::{EndOfLife, PredictionSettings, predict_eol, rul_distribution};
 use crate::real::{Real, cast};
@@ -127,36 +127,13 @@ pub struct ReactionWheelReport<T> {
 pub struct ReactionWheel<T: Real, const N: usize, const M: usize> {
     config: ReactionWheelConfig<T>,
     temperature: AdaptiveFilter<T, 3, N>,
-    ratio: AdaptiveFilter<T, 1, M>,
-    rate: AdaptiveFilter<T, 1, M>,
+    two_step: TwoStepLoss<T, M>,
     kalman: LossKalman<T>,
     exposure: ExposureAccumulator<T>,
-    previous_interval: Option<(IntervalExposure<T>, T)>,
     last_reading: Option<T>,
     last: Option<(T, T)>,
     /// False in [`ReactionWheel::UNSET`] and after a failed [`ReactionWheel::reset`].
     configured: bool,
-}
-
-fn loss_config<T: Real>(walk: T, lower: T, upper: T) -> PfConfig<T, 1> {
-    PfConfig {
-        random_walk_std: SVector::from([walk]),
-        lower: SVector::from([lower]),
-        upper: SVector::from([upper]),
-        ..PfConfig::default()
-    }
-}
-
-fn loss_adaptive<T: Real>(spread: T) -> AdaptiveConfig<T, 1> {
-    AdaptiveConfig {
-        method: Method::AdaptiveResampling,
-        ess_threshold: cast(0.5),
-        likelihood_threshold: cast(0.05),
-        min_window: 3,
-        spread_std: SVector::from([spread]),
-        improvement_offset: T::zero(),
-        improvement_ess: T::one(),
-    }
 }
 
 /// End of life: cumulative consumption reaches the threshold.
@@ -176,11 +153,9 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
     pub const UNSET: Self = Self {
         config: ReactionWheelConfig::UNSET,
         temperature: AdaptiveFilter::UNSET,
-        ratio: AdaptiveFilter::UNSET,
-        rate: AdaptiveFilter::UNSET,
+        two_step: TwoStepLoss::UNSET,
         kalman: LossKalman::UNSET,
         exposure: ExposureAccumulator::EMPTY,
-        previous_interval: None,
         last_reading: None,
         last: None,
         configured: false,
@@ -228,27 +203,17 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             },
             config.temperature_filter,
         )?;
-        self.ratio.reset(
-            SVector::from([b0]),
-            loss_config(config.loss_walk.0, T::zero(), cast(150.0)),
-            loss_adaptive(cast(4.0)),
-        )?;
-        self.ratio
-            .filter_mut()
-            .init_gaussian(&SVector::from([b0]), &SVector::from([bs]), rng)?;
-        self.rate.reset(
-            SVector::from([beta0]),
-            loss_config(config.loss_walk.1, cast(0.01), cast(100.0)),
-            loss_adaptive(cast(0.4)),
-        )?;
-        self.rate.filter_mut().init_gaussian(
-            &SVector::from([beta0]),
-            &SVector::from([betas]),
+        self.two_step.reset(
+            TwoStepConfig {
+                relative_noise: config.loss_relative_noise,
+                walk: config.loss_walk,
+                prior_b: config.prior_b,
+                prior_beta: config.prior_beta,
+            },
             rng,
         )?;
         self.config = config;
         self.exposure = ExposureAccumulator::EMPTY;
-        self.previous_interval = None;
         self.last_reading = None;
         self.last = None;
         self.configured = true;
@@ -299,10 +264,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
 
     /// Two-step estimates `(b in degC, beta in mL/s)`.
     pub fn loss_parameters(&self) -> (T, T) {
-        (
-            self.ratio.filter().mean().x,
-            self.rate.filter().mean().x * cast(BETA_UNIT),
-        )
+        self.two_step.parameters()
     }
 
     /// The step-1 filter (particles, summaries).
@@ -418,44 +380,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             Ok(report) => flags.insert(report.flags),
             Err(_) => flags.insert(Flags::MEASUREMENT_REJECTED),
         }
-        let noise = self.config.loss_relative_noise;
-        let u = exposure.as_input();
-        let one = T::one();
-        if let Some((before, previous_consumption)) = self.previous_interval {
-            let bu = before.as_input();
-            let u6 = SVector::<T, 6>::from([u.x, u.y, u.z, bu.x, bu.y, bu.z]);
-            let ratio = consumption / previous_consumption;
-            // A rejected update leaves the filter unchanged (flagged); the next interval retries.
-            let ratio_step = self.ratio.step(
-                &LossRatioModel {
-                    relative_noise: noise,
-                },
-                &u6,
-                Some(&[ratio]),
-                one,
-                T::zero(),
-                rng,
-            );
-            if ratio_step.is_err() {
-                flags.insert(Flags::MEASUREMENT_REJECTED);
-            }
-        }
-        let b_hat = self.ratio.filter().mean().x;
-        let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, b_hat]);
-        let rate_step = self.rate.step(
-            &LossRateModel {
-                relative_noise: noise,
-            },
-            &u4,
-            Some(&[consumption]),
-            one,
-            T::zero(),
-            rng,
-        );
-        if rate_step.is_err() {
-            flags.insert(Flags::MEASUREMENT_REJECTED);
-        }
-        self.previous_interval = Some((exposure, consumption));
+        flags.insert(self.two_step.update(exposure, consumption, rng));
         flags
     }
 
@@ -476,16 +401,14 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         rng: &mut R,
     ) -> Result<Summary<T>, Error> {
         let x0 = self.last_reading.ok_or(Error::InsufficientData)?;
-        for ((s, b), beta) in states
-            .iter_mut()
-            .zip(self.ratio.filter().particles().iter())
-            .zip(self.rate.filter().particles().iter())
-        {
-            *s = Vector3::new(x0, b.x, beta.x);
-        }
         let mut weights = [T::zero(); M];
-        for (i, w) in weights.iter_mut().enumerate() {
-            *w = self.ratio.filter().weight(i) * self.rate.filter().weight(i);
+        for ((s, w), (b, beta, weight)) in states
+            .iter_mut()
+            .zip(weights.iter_mut())
+            .zip(self.two_step.particles())
+        {
+            *s = Vector3::new(x0, b, beta);
+            *w = weight;
         }
         Self::rul_of_states(
             threshold,
@@ -698,9 +621,6 @@ mod tests {
             let b = built.step(t, 1.0, Some(&yk), &mut built_rng).unwrap();
             assert_eq!(a, b, "step {k}");
         }
-        assert_eq!(
-            unset.ratio.filter().particles(),
-            built.ratio.filter().particles()
-        );
+        assert!(unset.two_step.particles().eq(built.two_step.particles()));
     }
 }

@@ -387,6 +387,23 @@ impl<T: Real> Stochastic<T, 3, 2> for WheelTemperatureModel<T> {
             &[self.current_sensor_std, self.speed_sensor_std],
         )
     }
+
+    fn predicted_measurement(
+        &self,
+        x: &Vector3<T>,
+        _u: &Vector2<T>,
+        predicted: &mut [T],
+        noise_variance: &mut [T],
+    ) -> bool {
+        let (i, w) = (self.current_sensor_std, self.speed_sensor_std);
+        for (slot, v) in predicted.iter_mut().zip([x.x, x.y]) {
+            *slot = v;
+        }
+        for (slot, v) in noise_variance.iter_mut().zip([i * i, w * w]) {
+            *slot = v;
+        }
+        true
+    }
 }
 
 /// Lubricant loss rate of Eq. 7 without noise: `beta exp(-b / T)` (mL/s, T in degC).
