@@ -17,6 +17,8 @@ fn main() {
                 p.quiescent_rate_tol = 0.0;
             }
             let mut truth = TruthValve::new([0.0; 5], SensorNoise::default());
+            // The fine truth the filter noise was sized for (campaigns now use 10 ms).
+            truth.params.max_substep = 0.002;
             truth.state[idx] = a;
             let mut s = p.nominal_state(6000.0, 48000.0, [0.0; 5]);
             s[idx] = a;
