@@ -451,7 +451,7 @@ fn apply_generic(kind: GenericKind, p: f64, y: &[f64], dt: f64) -> Vec<f64> {
     if kind == GenericKind::Quantisation {
         y.to_vec()
     } else {
-        kind.apply(p, y, dt)
+        kind.apply(&[p], y, dt)
     }
 }
 
@@ -486,7 +486,7 @@ fn noisy(bp: &dyn BenchPlant, clean: &Clean, spec: &Spec, seed: u64) -> Vec<Vec<
     }
     for &(kind, ch, p) in &spec.generic {
         if kind == GenericKind::Quantisation {
-            out[ch] = kind.apply(p, &out[ch], bp.dt());
+            out[ch] = kind.apply(&[p], &out[ch], bp.dt());
         }
     }
     out
@@ -541,7 +541,7 @@ fn spec_enr(bp: &dyn BenchPlant, seed: u64, base: &Clean, spec: &Spec) -> (f64, 
                 },
                 seed,
             );
-            let q = kind.apply(p, &noise[ch], bp.dt());
+            let q = kind.apply(&[p], &noise[ch], bp.dt());
             out[ch]
                 .iter()
                 .zip(noise[ch].iter().zip(&q))
