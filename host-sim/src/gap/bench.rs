@@ -523,10 +523,12 @@ fn spec_enr(bp: &dyn BenchPlant, seed: u64, base: &Clean, spec: &Spec) -> (f64, 
         .iter()
         .map(|(n, m)| (n.as_str(), *m))
         .collect();
-    let clean = if effects.is_empty() {
-        base.clone()
+    let (clean, reference) = if effects.is_empty() {
+        (base.clone(), base.outputs.clone())
     } else {
-        bp.clean(seed, &effects)
+        let clean = bp.clean(seed, &effects);
+        let reference = visible_reference(bp, &clean).unwrap_or_else(|| base.outputs.clone());
+        (clean, reference)
     };
     let mut out = clean.outputs.clone();
     for &(kind, ch, p) in &spec.generic {
@@ -551,7 +553,38 @@ fn spec_enr(bp: &dyn BenchPlant, seed: u64, base: &Clean, spec: &Spec) -> (f64, 
             apply_generic(kind, p, &out[ch], bp.dt())
         };
     }
-    rms_ratio(&out, &base.outputs, &bp.sigma())
+    rms_ratio(&out, &reference, &bp.sigma())
+}
+
+/// What the user's model predicts for a noise-free run with plant effects: the nominal gap
+/// plant replayed over the run's inputs from its first samples. A plant effect's ratio is
+/// measured against it rather than against the truth's own run without the effect, which
+/// may start from another state (a truth that settles under a speed limiter starts slower):
+/// that difference is not in the data the diagnoser sees.
+fn visible_reference(bp: &dyn BenchPlant, clean: &Clean) -> Option<Vec<Vec<f64>>> {
+    let plant = crate::gap::plant::builtin_plant(bp.plant())?;
+    let mut data = PlantData {
+        t: clean.t.clone(),
+        dt: bp.dt(),
+        initial_window: plant.initial_window(),
+        ..Default::default()
+    };
+    data.inputs = clean.inputs.iter().cloned().collect();
+    data.outputs = bp
+        .outputs()
+        .iter()
+        .zip(&clean.outputs)
+        .map(|(n, y)| (n.to_string(), y.clone()))
+        .collect();
+    let sim = plant.simulate(&plant.default_params(), &[], &data).ok()?;
+    let all = plant.outputs();
+    bp.outputs()
+        .iter()
+        .map(|o| {
+            let i = all.iter().position(|a| a == o)?;
+            sim.outputs.get(i).cloned()
+        })
+        .collect()
 }
 
 /// One component to place at a target ENR.
