@@ -304,9 +304,18 @@ impl<'a> Problem<'a> {
         let mut out: Vec<Component> = (0..self.plant_effects.len())
             .map(Component::Plant)
             .collect();
-        for ch in 0..self.outputs.len() {
+        for (ch, channel) in self.outputs.iter().enumerate() {
             for kind in GenericKind::ALL {
-                out.push(Component::Generic(kind, ch));
+                // A plant effect that is the same prediction under the plant's own name
+                // stands in for it (two names for one fit would split the ranking).
+                let replaced = self.plant_effects.iter().any(|e| {
+                    e.replaces_generic
+                        .iter()
+                        .any(|(k, c)| *k == kind.name() && c == channel)
+                });
+                if !replaced {
+                    out.push(Component::Generic(kind, ch));
+                }
             }
         }
         out
