@@ -146,7 +146,7 @@ impl GenericKind {
 pub fn quantised_mean(v: f64, q: f64, s: f64) -> f64 {
     let q = q.max(1e-300);
     let r = s / q;
-    if !(r > 1e-9) {
+    if r.is_nan() || r <= 1e-9 {
         return q * (v / q).round();
     }
     if r >= 0.5 {
