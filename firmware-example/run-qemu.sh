@@ -7,7 +7,6 @@
 #   scooter:        worst instructions per 50 Hz sample <= 336,000
 #   each image:     static RAM (data + bss) <= 64 KiB, stack high-water <= 8 KiB,
 #                   flash (vectors + text + rodata + data) <= 256 KiB
-# (Stack: everything meets 8 KiB except the reaction wheel's start-up, see stack_check below.)
 # The plain-text build is the one parsed; the defmt build is built, sized and run for its exit
 # status only (decoding needs `cargo install defmt-print`, about 3 minutes: see README).
 set -euo pipefail
@@ -48,20 +47,6 @@ check() {
         fail "$1 = ${2:-missing} exceeds $3"
     fi
 }
-# stack_check NAME MEASURED CEILING: the 8 KiB budget; a known miss (docs/results.md,
-# "Firmware on the emulated Cortex-M4F") is reported as MISSED and fails only if the stack
-# grows past CEILING, the measured value plus 5 %. FIRMWARE_STACK_STRICT=1 makes a miss fatal.
-stack_check() {
-    if awk -v m="$2" 'BEGIN { exit !(m != "" && m + 0 <= 8192) }'; then
-        echo "ok   $1 = $2 (limit 8192)"
-    elif [ "${FIRMWARE_STACK_STRICT:-0}" = 1 ]; then
-        fail "$1 = ${2:-missing} exceeds 8192"
-    elif awk -v m="$2" -v c="$3" 'BEGIN { exit !(m != "" && m + 0 <= c + 0) }'; then
-        echo "MISSED budget: $1 = $2 exceeds 8192 (known, not grown past $3)"
-    else
-        fail "$1 = ${2:-missing} exceeds 8192 and the known ceiling $3"
-    fi
-}
 # rul_check NAME FIRMWARE HOST: |FIRMWARE - HOST| / HOST <= 2 %.
 rul_check() {
     local gap
@@ -92,11 +77,8 @@ for bin in reaction_wheel scooter; do
     grep -q "result=pass" "$log" || fail "$bin did not report result=pass"
     sizes "$ELF_DIR/$bin" "$bin (plain)"
     sizes "$DEFMT_DIR/$bin" "$bin (defmt)"
-    # The wheel's start-up (ReactionWheel::new assembling its filters on the stack) misses
-    # 8 KiB; its ceiling is the measured value plus 5 %. The scooter's meets it.
-    if [ "$bin" = reaction_wheel ]; then startup_ceiling=14700; else startup_ceiling=8192; fi
     check "$bin stack high-water bytes (per-sample loop)" "$(value stack_high_water_bytes "$log")" 8192
-    stack_check "$bin stack high-water bytes (start-up)" "$(value init_stack_high_water_bytes "$log")" "$startup_ceiling"
+    check "$bin stack high-water bytes (start-up)" "$(value init_stack_high_water_bytes "$log")" 8192
     if [ "$bin" = reaction_wheel ]; then
         check "$bin worst instructions per sample" "$(value step_worst_instructions "$log")" 840000
         check "$bin stack high-water bytes (RUL prediction)" "$(value rul_stack_high_water_bytes "$log")" 8192

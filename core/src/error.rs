@@ -29,6 +29,8 @@ pub enum Error {
     OutOfRange(&'static str),
     /// Not enough data for the requested operation (e.g. an empty window).
     InsufficientData,
+    /// A statically allocated placeholder was used before it was reset with a configuration.
+    NotConfigured,
 }
 
 impl fmt::Display for Error {
@@ -65,6 +67,9 @@ impl fmt::Display for Error {
                 write!(f, "`{name}` is outside its valid range; sample rejected")
             }
             Error::InsufficientData => f.write_str("not enough data for this operation"),
+            Error::NotConfigured => {
+                f.write_str("filter is an unset placeholder; reset it with a configuration first")
+            }
         }
     }
 }

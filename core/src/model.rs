@@ -44,6 +44,21 @@ pub trait Stochastic<T: Real, const NX: usize, const NU: usize>: Model<T, NX, NU
     /// that `y` has [`Stochastic::measurement_len`] finite entries. May return `-inf` for an
     /// impossible state, never NaN for a finite state.
     fn log_likelihood(&self, x: &SVector<T, NX>, u: &SVector<T, NU>, y: &[T]) -> T;
+
+    /// The noise-free measurement of `x` into `predicted` and each channel's measurement-noise
+    /// variance into `noise_variance` (both [`Stochastic::measurement_len`] long), from which
+    /// a particle filter reports its innovation. `false` (the default) when the sensor has no
+    /// such form (e.g. a discrete sensor); the report then carries no innovation.
+    fn predicted_measurement(
+        &self,
+        x: &SVector<T, NX>,
+        u: &SVector<T, NU>,
+        predicted: &mut [T],
+        noise_variance: &mut [T],
+    ) -> bool {
+        let _ = (x, u, predicted, noise_variance);
+        false
+    }
 }
 
 /// Log-density (without the constant) of independent Gaussian sensors: `-1/2 sum ((y-m)/s)^2`.

@@ -1,6 +1,11 @@
 //! The scalar abstraction: f32 on the microcontroller, f64 on the host.
 
-use nalgebra::RealField;
+use nalgebra::{ArrayStorage, RealField, SVector};
+
+/// `SVector::zeros()` usable in constants.
+pub const fn zero_vector<T: Real, const N: usize>() -> SVector<T, N> {
+    SVector::from_array_storage(ArrayStorage([[T::ZERO; N]; 1]))
+}
 
 /// A floating-point scalar the core computes in (implemented for `f32` and `f64`).
 pub trait Real: RealField + Copy + Default + PartialOrd {
@@ -10,6 +15,8 @@ pub trait Real: RealField + Copy + Default + PartialOrd {
     const MIN_POSITIVE: Self;
     /// Machine epsilon.
     const EPSILON: Self;
+    /// 0, usable in constants (the placeholders of statically allocated filters).
+    const ZERO: Self;
     /// Converts to f64 (reporting, metrics on the host).
     fn as_f64(self) -> f64;
     /// True when neither NaN nor infinite.
@@ -36,6 +43,7 @@ impl Real for f64 {
     const MAX_FINITE: Self = f64::MAX;
     const MIN_POSITIVE: Self = f64::MIN_POSITIVE;
     const EPSILON: Self = f64::EPSILON;
+    const ZERO: Self = 0.0;
     #[inline]
     fn as_f64(self) -> f64 {
         self
@@ -78,6 +86,7 @@ impl Real for f32 {
     const MAX_FINITE: Self = f32::MAX;
     const MIN_POSITIVE: Self = f32::MIN_POSITIVE;
     const EPSILON: Self = f32::EPSILON;
+    const ZERO: Self = 0.0;
     #[inline]
     fn as_f64(self) -> f64 {
         f64::from(self)

@@ -30,10 +30,14 @@ fn main() {
                 .iter()
                 .map(|p| {
                     format!(
-                        "day {} err {:.2} % covered {}",
+                        "day {} err {:.2} % covered {} (truth {:.3} d, median {:.3}, 90 % {:.3}-{:.3})",
                         p.day,
                         p.error(),
-                        p.covered()
+                        p.covered(),
+                        p.truth,
+                        p.median,
+                        p.p05,
+                        p.p95
                     )
                 })
                 .collect();

@@ -6,6 +6,7 @@ use nalgebra::{SVector, Vector2, Vector3};
 use prognos_core::filter::adaptive::{AdaptiveConfig, AdaptiveFilter, Method};
 use prognos_core::filter::particle::{ParticleFilter, PfConfig};
 use prognos_core::plants::lubricant_kalman::{LossKalman, LossKalmanConfig};
+use prognos_core::plants::lubricant_two_step::{TwoStepConfig, TwoStepLoss};
 use prognos_core::plants::reaction_wheel::{SAMPLE_INTERVAL_S, WheelTemperatureModel};
 use prognos_core::{Real, cast};
 use rand_core::{Rng, SeedableRng};
@@ -640,16 +641,9 @@ pub const STEP2_PARTICLES: usize = 500;
 /// filter, fed one interval at a time.
 pub struct LossEstimators {
     kalman: LossKalman<f64>,
-    ratio: AdaptiveFilter<f64, 1, STEP2_PARTICLES>,
-    rate: AdaptiveFilter<f64, 1, STEP2_PARTICLES>,
+    two_step: TwoStepLoss<f64, STEP2_PARTICLES>,
     joint: AdaptiveFilter<f64, 2, STEP2_PARTICLES>,
-    ratio_model: prognos_core::plants::reaction_wheel::LossRatioModel<f64>,
-    rate_model: prognos_core::plants::reaction_wheel::LossRateModel<f64>,
     joint_model: prognos_core::plants::reaction_wheel::LossJointModel<f64>,
-    previous: Option<(
-        prognos_core::plants::reaction_wheel::IntervalExposure<f64>,
-        f64,
-    )>,
     rng: Xoshiro256PlusPlus,
 }
 
@@ -668,33 +662,18 @@ fn adaptive_config<const NX: usize>(spread: SVector<f64, NX>) -> AdaptiveConfig<
 impl LossEstimators {
     /// Filters with the settings' priors and walks.
     pub fn new(s: &Step2Settings, seed: u64) -> Option<Self> {
-        use prognos_core::plants::reaction_wheel::{LossJointModel, LossRateModel, LossRatioModel};
+        use prognos_core::plants::reaction_wheel::LossJointModel;
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0xB0B0_1234);
-        let cfg1 = |walk: f64, lo: f64, hi: f64| PfConfig::<f64, 1> {
-            random_walk_std: SVector::from([walk]),
-            lower: SVector::from([lo]),
-            upper: SVector::from([hi]),
-            ..PfConfig::default()
-        };
-        let mut ratio_pf =
-            ParticleFilter::new(SVector::from([s.prior_b.0]), cfg1(s.walk.0, 0.0, 150.0)).ok()?;
-        ratio_pf
-            .init_gaussian(
-                &SVector::from([s.prior_b.0]),
-                &SVector::from([s.prior_b.1]),
-                &mut rng,
-            )
-            .ok()?;
-        let mut rate_pf =
-            ParticleFilter::new(SVector::from([s.prior_beta.0]), cfg1(s.walk.1, 0.01, 100.0))
-                .ok()?;
-        rate_pf
-            .init_gaussian(
-                &SVector::from([s.prior_beta.0]),
-                &SVector::from([s.prior_beta.1]),
-                &mut rng,
-            )
-            .ok()?;
+        let two_step = TwoStepLoss::new(
+            TwoStepConfig {
+                relative_noise: s.assumed_noise,
+                walk: s.walk,
+                prior_b: s.prior_b,
+                prior_beta: s.prior_beta,
+            },
+            &mut rng,
+        )
+        .ok()?;
         let cfg2 = PfConfig::<f64, 2> {
             random_walk_std: Vector2::new(s.walk.0, s.walk.1),
             lower: Vector2::new(0.0, 0.01),
@@ -724,19 +703,11 @@ impl LossEstimators {
         .ok()?;
         Some(Self {
             kalman,
-            ratio: AdaptiveFilter::new(ratio_pf, adaptive_config(SVector::from([4.0]))).ok()?,
-            rate: AdaptiveFilter::new(rate_pf, adaptive_config(SVector::from([0.4]))).ok()?,
+            two_step,
             joint: AdaptiveFilter::new(joint_pf, adaptive_config(Vector2::new(4.0, 0.4))).ok()?,
-            ratio_model: LossRatioModel {
-                relative_noise: s.assumed_noise,
-            },
-            rate_model: LossRateModel {
-                relative_noise: s.assumed_noise,
-            },
             joint_model: LossJointModel {
                 relative_noise: s.assumed_noise,
             },
-            previous: None,
             rng,
         })
     }
@@ -758,38 +729,13 @@ impl LossEstimators {
             0.0,
             &mut self.rng,
         );
-        if let Some((before, previous_consumption)) = self.previous {
-            let bu = before.as_input();
-            let u6 = SVector::<f64, 6>::from([u.x, u.y, u.z, bu.x, bu.y, bu.z]);
-            let ratio = consumption / previous_consumption;
-            let _ = self.ratio.step(
-                &self.ratio_model,
-                &u6,
-                Some(&[ratio]),
-                1.0,
-                0.0,
-                &mut self.rng,
-            );
-        }
-        let b_hat = self.ratio.filter().mean().x;
-        let u4 = SVector::<f64, 4>::from([u.x, u.y, u.z, b_hat]);
-        let _ = self.rate.step(
-            &self.rate_model,
-            &u4,
-            Some(&[consumption]),
-            1.0,
-            0.0,
-            &mut self.rng,
-        );
-        self.previous = Some((exposure, consumption));
+        // Rejected updates are flagged inside and leave the filters unchanged: go on.
+        let _ = self.two_step.update(exposure, consumption, &mut self.rng);
     }
 
     /// Two-step estimate `(b, beta in mL/s)`.
     pub fn two_step(&self) -> (f64, f64) {
-        (
-            self.ratio.filter().mean().x,
-            self.rate.filter().mean().x * prognos_core::plants::reaction_wheel::BETA_UNIT,
-        )
+        self.two_step.parameters()
     }
 
     /// Changes declared by the Kalman filter's detector so far.
@@ -822,12 +768,7 @@ impl LossEstimators {
 
     /// Paired posterior samples `(b, beta in 1e-6 mL/s)` of the two-step filters.
     pub fn two_step_particles(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
-        self.ratio
-            .filter()
-            .particles()
-            .iter()
-            .zip(self.rate.filter().particles().iter())
-            .map(|(b, beta)| (b.x, beta.x))
+        self.two_step.particles().map(|(b, beta, _)| (b, beta))
     }
 }
 

@@ -87,6 +87,10 @@ pub fn run_with_faults<T: Real>(
                 continue;
             }
         };
+        if report.spike_dropped {
+            assert!(!faults.is_off(), "clean sample dropped as a spike at {t}");
+            trace.rejected += 1;
+        }
         if report.active && trace.activation.is_none() {
             trace.activation = Some(t);
         }

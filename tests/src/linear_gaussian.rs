@@ -105,6 +105,22 @@ impl<T: Real, const NX: usize, const NY: usize> Stochastic<T, NX, 1> for LinearG
         let e = y - self.h * x;
         -(e.transpose() * self.r_inv * e)[0] * prognos_core::cast(0.5)
     }
+
+    fn predicted_measurement(
+        &self,
+        x: &SVector<T, NX>,
+        _u: &SVector<T, 1>,
+        predicted: &mut [T],
+        noise_variance: &mut [T],
+    ) -> bool {
+        for (slot, v) in predicted.iter_mut().zip((self.h * x).iter()) {
+            *slot = *v;
+        }
+        for (slot, v) in noise_variance.iter_mut().zip(self.r.diagonal().iter()) {
+            *slot = *v;
+        }
+        true
+    }
 }
 
 /// The exact Kalman filter for [`LinearGaussian`], in f64 (Joseph-form covariance update).

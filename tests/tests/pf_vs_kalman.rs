@@ -112,3 +112,87 @@ fn particle_filter_matches_kalman_filter_f32() {
     let a = run::<f32>(Resampling::Systematic, 5);
     check("f32 Systematic", &a, 0.15, 0.15);
 }
+
+/// The same model without a predicted measurement: the PF must then report no innovation
+/// and otherwise behave bit for bit as with it.
+struct Opaque(LinearGaussian<f64, 2, 1>);
+impl prognos_core::model::Model<f64, 2, 1> for Opaque {
+    fn step(&self, x: &Vector2<f64>, u: &Vector1<f64>, dt: f64) -> Vector2<f64> {
+        self.0.step(x, u, dt)
+    }
+}
+impl Stochastic<f64, 2, 1> for Opaque {
+    fn measurement_len(&self) -> usize {
+        1
+    }
+    fn sample_step<R: rand_core::Rng + ?Sized>(
+        &self,
+        x: &Vector2<f64>,
+        u: &Vector1<f64>,
+        dt: f64,
+        rng: &mut R,
+    ) -> Vector2<f64> {
+        self.0.sample_step(x, u, dt, rng)
+    }
+    fn log_likelihood(&self, x: &Vector2<f64>, u: &Vector1<f64>, y: &[f64]) -> f64 {
+        self.0.log_likelihood(x, u, y)
+    }
+}
+
+/// The PF's innovation (prior-weighted predicted measurement) and its variance against the
+/// Kalman filter's exact `y - H x^-` and `S = H P^- H^T + R`.
+#[test]
+fn particle_filter_innovation_matches_kalman_filter() {
+    let model = oscillator();
+    let x0 = Vector2::new(1.0, 0.0);
+    let p0_std = Vector2::new(0.5, 0.5);
+    let mut kf = KalmanFilter::new(x0, nalgebra::Matrix2::from_diagonal(&p0_std.map(|s| s * s)));
+    let config = PfConfig {
+        resample_threshold: 0.5,
+        ..PfConfig::default()
+    };
+    let mut pf = ParticleFilter::<f64, 2, N>::new(x0, config).unwrap();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
+    pf.init_gaussian(&x0, &p0_std, &mut rng).unwrap();
+    let mut blind = pf.clone();
+    let mut blind_rng = rng.clone();
+    let opaque = Opaque(model.clone());
+    let mut world = Xoshiro256PlusPlus::seed_from_u64(9 ^ 0x5eed);
+    let mut truth = Vector2::new(1.5, -0.3);
+    let (mut mean_err, mut var_err, mut ratio_err) = (0.0, 0.0, 0.0);
+    for k in 0..STEPS {
+        let u = input(k);
+        truth = model.sample_step(&truth, &Vector1::new(u), 1.0, &mut world);
+        let y = model.sample_measurement(&truth, &mut world);
+        kf.predict(&model, u);
+        let s = (model.h * kf.p * model.h.transpose() + model.r)[0];
+        let e = y[0] - (model.h * kf.x)[0];
+        kf.update(&model, &y);
+        let uu = Vector1::new(u);
+        let report = pf.step(&model, &uu, Some(&[y[0]]), 1.0, &mut rng).unwrap();
+        let plain = blind
+            .step(&opaque, &uu, Some(&[y[0]]), 1.0, &mut blind_rng)
+            .unwrap();
+        assert_eq!(report.channels, 1);
+        assert_eq!((plain.channels, plain.test_ratio), (0, 0.0));
+        assert_eq!(pf.particles(), blind.particles());
+        assert_eq!(pf.log_weights(), blind.log_weights());
+        assert_eq!(report.log_evidence, plain.log_evidence);
+        mean_err += (report.innovation[0] - e).abs() / s.sqrt();
+        var_err += (report.innovation_variance[0] / s - 1.0).abs();
+        ratio_err += (report.test_ratio - e * e / s).abs();
+        assert!(
+            (report.test_ratio - report.innovation[0].powi(2) / report.innovation_variance[0])
+                .abs()
+                < 1e-12
+        );
+    }
+    let n = STEPS as f64;
+    let (mean_err, var_err, ratio_err) = (mean_err / n, var_err / n, ratio_err / n);
+    println!(
+        "innovation error/sqrt(S) {mean_err:.4}, |var/S - 1| {var_err:.4}, |ratio - e^2/S| {ratio_err:.4}"
+    );
+    assert!(mean_err < 0.05, "{mean_err}");
+    assert!(var_err < 0.1, "{var_err}");
+    assert!(ratio_err < 0.1, "{ratio_err}");
+}

@@ -8,7 +8,7 @@
 //! (the paper's `r2` times `N4`) so that `Psi` adds like units.
 
 use crate::error::Error;
-use crate::plants::scooter::ScooterParams;
+use crate::plants::scooter::{ScooterParams, rebase_angles};
 use crate::real::{Real, all_finite, cast};
 
 /// Multiplicative uncertainties `delta` of Table 3 used by the adaptive thresholds.
@@ -129,6 +129,8 @@ pub struct ScooterArr<T: Real> {
     previous_y: Option<[T; 3]>,
     /// Last two residuals (most recent first), for the second difference in `Psi`.
     history: [[T; 3]; 2],
+    /// Interval between the last two residuals (for `Psi` over a gap).
+    last_dt: T,
     samples: u32,
 }
 
@@ -142,6 +144,7 @@ impl<T: Real> ScooterArr<T> {
             positions: [T::zero(); 3],
             previous_y: None,
             history: [[T::zero(); 3]; 2],
+            last_dt: T::zero(),
             samples: 0,
         }
     }
@@ -226,13 +229,23 @@ impl<T: Real> ScooterArr<T> {
         if self.samples >= 2 {
             for (i, ((r, a), b)) in residuals.iter().zip(h1.iter()).zip(h2.iter()).enumerate() {
                 if cv & (1 << i) != 0 {
-                    psi += ((*r - two * *a + *b) / dt2).abs();
+                    psi += if (dt - self.last_dt).abs() <= self.last_dt * cast::<T>(1e-3) {
+                        ((*r - two * *a + *b) / dt2).abs()
+                    } else {
+                        // Unequal intervals (a missing sample): the three-point second
+                        // derivative on a non-uniform grid, or a linear drift would fire.
+                        ((*r - *a) / dt - (*a - *b) / self.last_dt).abs() * two
+                            / (dt + self.last_dt)
+                    };
                 }
             }
         }
+        // The integrals enter only through the twists: keep them bounded (see rebase_angles).
+        rebase_angles(&mut th_r, &mut s_m, &mut th_f, p.n4);
         self.positions = [th_r, s_m, th_f];
         self.previous_y = Some(*y);
         self.history = [residuals, h1];
+        self.last_dt = dt;
         self.samples = self.samples.saturating_add(1);
         Ok(ArrReport {
             residuals,

@@ -21,11 +21,11 @@
 //! The likelihood is taken as the model's `exp(log_likelihood)`, which for Gaussian sensors
 //! (no normalising constant) lies in (0, 1], so `p_eff` is scale-free.
 
-use super::particle::{ParticleFilter, PfReport};
+use super::particle::{ParticleFilter, PfConfig, PfReport};
 use crate::error::Error;
 use crate::model::Stochastic;
 use crate::random::standard_normal;
-use crate::real::{Real, cast};
+use crate::real::{Real, cast, zero_vector};
 use nalgebra::SVector;
 use rand_core::Rng;
 
@@ -64,6 +64,17 @@ pub struct AdaptiveConfig<T: Real, const NX: usize> {
 }
 
 impl<T: Real, const NX: usize> AdaptiveConfig<T, NX> {
+    /// All-zero settings of an [`AdaptiveFilter::UNSET`] placeholder.
+    pub const UNSET: Self = Self {
+        method: Method::Plain,
+        ess_threshold: T::ZERO,
+        likelihood_threshold: T::ZERO,
+        min_window: 0,
+        spread_std: zero_vector(),
+        improvement_offset: T::ZERO,
+        improvement_ess: T::ZERO,
+    };
+
     fn validate(&self) -> Result<(), Error> {
         if !(self.ess_threshold >= T::zero() && self.ess_threshold <= T::one()) {
             return Err(Error::InvalidParameter("ess_threshold"));
@@ -109,6 +120,15 @@ pub struct AdaptiveFilter<T: Real, const NX: usize, const N: usize> {
 }
 
 impl<T: Real, const NX: usize, const N: usize> AdaptiveFilter<T, NX, N> {
+    /// An all-zero placeholder for static storage (see [`ParticleFilter::UNSET`]):
+    /// [`AdaptiveFilter::reset`] it in place before use.
+    pub const UNSET: Self = Self {
+        filter: ParticleFilter::UNSET,
+        config: AdaptiveConfig::UNSET,
+        likelihood_sum: T::ZERO,
+        likelihood_count: 0,
+    };
+
     /// Wraps `filter`; its own ESS-triggered resampling is switched off (this layer decides
     /// when to resample), its resampling scheme, roughening, walks and bounds are kept.
     pub fn new(
@@ -125,6 +145,24 @@ impl<T: Real, const NX: usize, const N: usize> AdaptiveFilter<T, NX, N> {
             likelihood_sum: T::zero(),
             likelihood_count: 0,
         })
+    }
+
+    /// Re-initialises in place what [`AdaptiveFilter::new`] would build from
+    /// `ParticleFilter::new(x0, filter_config)` and `config`. Bad settings are an error and
+    /// change nothing.
+    pub fn reset(
+        &mut self,
+        x0: SVector<T, NX>,
+        mut filter_config: PfConfig<T, NX>,
+        config: AdaptiveConfig<T, NX>,
+    ) -> Result<(), Error> {
+        config.validate()?;
+        filter_config.resample_threshold = T::zero();
+        self.filter.reset(x0, filter_config)?;
+        self.config = config;
+        self.likelihood_sum = T::zero();
+        self.likelihood_count = 0;
+        Ok(())
     }
 
     /// The underlying particle filter (particles, weights, summaries).

@@ -8,7 +8,7 @@ use super::resample::{Resampling, apply_counts, offspring_counts};
 use crate::error::{Error, check_dt};
 use crate::model::Stochastic;
 use crate::random::standard_normal;
-use crate::real::{Real, all_finite, cast};
+use crate::real::{Real, all_finite, cast, zero_vector};
 use crate::safeguard::{Flags, log_sum_exp};
 use crate::stats::{Summary, summarise};
 use nalgebra::{SMatrix, SVector};
@@ -47,6 +47,17 @@ impl<T: Real, const NX: usize> Default for PfConfig<T, NX> {
 }
 
 impl<T: Real, const NX: usize> PfConfig<T, NX> {
+    /// All-zero settings of a [`ParticleFilter::UNSET`] placeholder (not a usable configuration:
+    /// bounds `[0, 0]`).
+    pub const UNSET: Self = Self {
+        resampling: Resampling::Systematic,
+        resample_threshold: T::ZERO,
+        random_walk_std: zero_vector(),
+        roughening: zero_vector(),
+        lower: zero_vector(),
+        upper: zero_vector(),
+    };
+
     fn validate(&self) -> Result<(), Error> {
         if !(self.resample_threshold >= T::zero() && self.resample_threshold <= T::one()) {
             return Err(Error::InvalidParameter("resample_threshold"));
@@ -83,9 +94,22 @@ pub struct PfReport<T> {
     pub log_evidence: T,
     /// Largest single-particle log-likelihood.
     pub max_log_likelihood: T,
+    /// Innovation `y - E[h(x)]` per channel under the prior weights (the first `channels`
+    /// entries; none when the model has no [`Stochastic::predicted_measurement`] or more than
+    /// [`PF_INNOVATION_CHANNELS`] channels).
+    pub innovation: [T; PF_INNOVATION_CHANNELS],
+    /// Its variance: the weighted spread of the particles' `h(x_i)` plus the sensor noise.
+    pub innovation_variance: [T; PF_INNOVATION_CHANNELS],
+    pub channels: usize,
+    /// Test ratio: the normalised innovation squared `sum innovation^2 / variance` over the
+    /// channels (channels treated as independent); 0 without channels.
+    pub test_ratio: T,
     /// Safeguards and actions taken (resampling, roughening, recoveries).
     pub flags: Flags,
 }
+
+/// Measurement channels a [`PfReport`] holds the innovation of.
+pub const PF_INNOVATION_CHANNELS: usize = 4;
 
 /// SIR particle filter over `N` particles of an `NX`-dimensional state.
 ///
@@ -116,21 +140,37 @@ impl<T: Real, const NX: usize, const N: usize> core::fmt::Debug for ParticleFilt
 impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
     const NONEMPTY: () = assert!(N > 0 && NX > 0, "need at least one particle and one state");
 
+    /// An all-zero placeholder for static storage, built at compile time so that a large
+    /// filter never passes through the stack: [`ParticleFilter::reset`] it in place before use.
+    pub const UNSET: Self = Self {
+        particles: [zero_vector(); N],
+        log_weights: [T::ZERO; N],
+        scratch: [T::ZERO; N],
+        counts: [0; N],
+        config: PfConfig::UNSET,
+    };
+
     /// A filter with all particles at `x0` and uniform weights.
     pub fn new(x0: SVector<T, NX>, config: PfConfig<T, NX>) -> Result<Self, Error> {
+        let mut filter = Self::UNSET;
+        filter.reset(x0, config)?;
+        Ok(filter)
+    }
+
+    /// Re-initialises the filter in place, as [`ParticleFilter::new`] would build it: all
+    /// particles at `x0`, uniform weights. Bad settings are an error and change nothing.
+    pub fn reset(&mut self, x0: SVector<T, NX>, config: PfConfig<T, NX>) -> Result<(), Error> {
         let () = Self::NONEMPTY;
         config.validate()?;
         if !all_finite(x0.as_slice()) {
             return Err(Error::InvalidParameter("x0"));
         }
-        let uniform = -cast::<T>(N as f64).ln();
-        Ok(Self {
-            particles: [x0; N],
-            log_weights: [uniform; N],
-            scratch: [T::zero(); N],
-            counts: [0; N],
-            config,
-        })
+        self.particles.fill(x0);
+        self.reset_weights();
+        self.scratch.fill(T::zero());
+        self.counts.fill(0);
+        self.config = config;
+        Ok(())
     }
 
     /// Re-initialises particles from independent Gaussians `mean + std * z`, clamped to the
@@ -175,7 +215,7 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
 
     fn reset_weights(&mut self) {
         let uniform = -cast::<T>(N as f64).ln();
-        self.log_weights = [uniform; N];
+        self.log_weights.fill(uniform);
     }
 
     /// The particles.
@@ -367,7 +407,9 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
             log_evidence: neg_inf,
             max_log_likelihood: max_ll,
             flags: Flags::NONE,
+            ..PfReport::default()
         };
+        self.innovation(model, u, y, &mut report);
         if !max_total.finite() {
             report.flags.insert(Flags::WEIGHT_COLLAPSE_RECOVERED);
             report.ess = self.ess();
@@ -390,6 +432,71 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
             report.flags.insert(self.resample(rng));
         }
         Ok(report)
+    }
+
+    /// Fills the report's innovation from the particles' predicted measurements under the
+    /// current (prior) weights: weighted mean and spread in one pass (West's weighted
+    /// incremental form), plus the sensor noise. Reads the particles only.
+    fn innovation<M, const NU: usize>(
+        &self,
+        model: &M,
+        u: &SVector<T, NU>,
+        y: &[T],
+        report: &mut PfReport<T>,
+    ) where
+        M: Stochastic<T, NX, NU>,
+    {
+        const C: usize = PF_INNOVATION_CHANNELS;
+        let channels = y.len();
+        if channels > C {
+            return;
+        }
+        let (mut mean, mut m2, mut noise) = ([T::zero(); C], [T::zero(); C], [T::zero(); C]);
+        let mut predicted = [T::zero(); C];
+        let mut total = T::zero();
+        for (p, lw) in self.particles.iter().zip(self.log_weights.iter()) {
+            let (Some(h), Some(r)) = (predicted.get_mut(..channels), noise.get_mut(..channels))
+            else {
+                return;
+            };
+            if !model.predicted_measurement(p, u, h, r) {
+                return;
+            }
+            let w = lw.exp();
+            if !(w > T::zero()) || !all_finite(h) {
+                continue;
+            }
+            total += w;
+            let share = w / total;
+            for ((m, s), h) in mean.iter_mut().zip(m2.iter_mut()).zip(predicted.iter()) {
+                let delta = *h - *m;
+                *m += delta * share;
+                *s += w * delta * (*h - *m);
+            }
+        }
+        if !(total > T::zero()) {
+            return;
+        }
+        let mut ratio = T::zero();
+        for (j, yj) in y.iter().enumerate() {
+            let (Some(m), Some(s), Some(r)) = (mean.get(j), m2.get(j), noise.get(j)) else {
+                return;
+            };
+            let e = *yj - *m;
+            let v = *s / total + *r;
+            if let (Some(slot_e), Some(slot_v)) = (
+                report.innovation.get_mut(j),
+                report.innovation_variance.get_mut(j),
+            ) {
+                *slot_e = e;
+                *slot_v = v;
+            }
+            if v > T::zero() {
+                ratio += e * e / v;
+            }
+        }
+        report.channels = channels;
+        report.test_ratio = ratio;
     }
 
     /// One full step: predict over `dt`, then update with `y` if present (`None` is a

@@ -506,14 +506,15 @@ impl<T: Real, const NX: usize> EndOfLife<T, NX> for StateThreshold<T> {
     }
 }
 
-/// RUL samples of a GP model from the estimate `N(mean, cov)`: draws `states.len()` states,
+/// RUL samples of a GP model (a [`GpTransition`] or the rate-scaled
+/// [`super::gp_rate::RateScaledTransition`]) from the estimate `N(mean, cov)`: draws `states.len()` states,
 /// propagates each with draws from the GP predictive distribution until the threshold (or
 /// `max_steps` cycles), and writes each one's cycles to failure into `times` (`MAX_FINITE`
 /// beyond the horizon). Summarise with [`crate::prognose::rul_distribution`]. Returns how many
 /// samples reached the threshold.
 #[allow(clippy::too_many_arguments)]
-pub fn sample_rul<T, E, F, R, const NX: usize, const NU: usize, const D: usize, const M: usize>(
-    transition: &GpTransition<'_, T, D, M, NX>,
+pub fn sample_rul<T, G, E, F, R, const NX: usize, const NU: usize>(
+    transition: &G,
     mean: &SVector<T, NX>,
     cov: &SMatrix<T, NX, NX>,
     eol: &E,
@@ -525,6 +526,7 @@ pub fn sample_rul<T, E, F, R, const NX: usize, const NU: usize, const D: usize, 
 ) -> Result<usize, Error>
 where
     T: Real,
+    G: Stochastic<T, NX, NU>,
     E: EndOfLife<T, NX>,
     F: FnMut(u32) -> SVector<T, NU>,
     R: Rng + ?Sized,

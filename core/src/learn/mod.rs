@@ -2,3 +2,4 @@
 
 pub mod ar;
 pub mod gp;
+pub mod gp_rate;

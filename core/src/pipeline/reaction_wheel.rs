@@ -14,11 +14,11 @@
 
 use crate::error::Error;
 use crate::filter::adaptive::{AdaptiveConfig, AdaptiveFilter, Method};
-use crate::filter::particle::{ParticleFilter, PfConfig, PfReport};
+use crate::filter::particle::{PfConfig, PfReport};
 use crate::plants::lubricant_kalman::{LossKalman, LossKalmanConfig};
+use crate::plants::lubricant_two_step::{TwoStepConfig, TwoStepLoss};
 use crate::plants::reaction_wheel::{
-    BETA_UNIT, ExposureAccumulator, IntervalExposure, LossAccumulationModel, LossRateModel,
-    LossRatioModel, WheelTemperatureModel,
+    BETA_UNIT, ExposureAccumulator, IntervalExposure, LossAccumulationModel, WheelTemperatureModel,
 };
 use crate::prognose::eol::{EndOfLife, PredictionSettings, predict_eol, rul_distribution};
 use crate::real::{Real, cast};
@@ -51,6 +51,19 @@ pub struct ReactionWheelConfig<T: Real> {
 }
 
 impl<T: Real> ReactionWheelConfig<T> {
+    /// All zeros: the configuration of [`ReactionWheel::UNSET`] (not a usable one).
+    pub const UNSET: Self = Self {
+        wheel_model: WheelTemperatureModel::UNSET,
+        temperature_filter: AdaptiveConfig::UNSET,
+        prior_temperature: (T::ZERO, T::ZERO),
+        improvement_gain: T::ZERO,
+        loss_relative_noise: T::ZERO,
+        loss_walk: (T::ZERO, T::ZERO),
+        prior_b: (T::ZERO, T::ZERO),
+        prior_beta: (T::ZERO, T::ZERO),
+        loss_kalman: LossKalmanConfig::UNSET,
+    };
+
     /// The settings used for the paper's scenarios, for given sensor noise.
     pub fn new(current_std: T, speed_std: T) -> Result<Self, Error> {
         let mut wheel_model = WheelTemperatureModel::new(current_std, speed_std)?;
@@ -114,34 +127,13 @@ pub struct ReactionWheelReport<T> {
 pub struct ReactionWheel<T: Real, const N: usize, const M: usize> {
     config: ReactionWheelConfig<T>,
     temperature: AdaptiveFilter<T, 3, N>,
-    ratio: AdaptiveFilter<T, 1, M>,
-    rate: AdaptiveFilter<T, 1, M>,
+    two_step: TwoStepLoss<T, M>,
     kalman: LossKalman<T>,
     exposure: ExposureAccumulator<T>,
-    previous_interval: Option<(IntervalExposure<T>, T)>,
     last_reading: Option<T>,
     last: Option<(T, T)>,
-}
-
-fn loss_config<T: Real>(walk: T, lower: T, upper: T) -> PfConfig<T, 1> {
-    PfConfig {
-        random_walk_std: SVector::from([walk]),
-        lower: SVector::from([lower]),
-        upper: SVector::from([upper]),
-        ..PfConfig::default()
-    }
-}
-
-fn loss_adaptive<T: Real>(spread: T) -> AdaptiveConfig<T, 1> {
-    AdaptiveConfig {
-        method: Method::AdaptiveResampling,
-        ess_threshold: cast(0.5),
-        likelihood_threshold: cast(0.05),
-        min_window: 3,
-        spread_std: SVector::from([spread]),
-        improvement_offset: T::zero(),
-        improvement_ess: T::one(),
-    }
+    /// False in [`ReactionWheel::UNSET`] and after a failed [`ReactionWheel::reset`].
+    configured: bool,
 }
 
 /// End of life: cumulative consumption reaches the threshold.
@@ -154,34 +146,44 @@ impl<T: Real> EndOfLife<T, 3> for ConsumptionThreshold<T> {
 }
 
 impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
+    /// An unset placeholder, all zeros, built at compile time: a `static` holding it lives
+    /// in `.bss`, and [`ReactionWheel::reset`] configures it in place, so that the filters
+    /// never pass through the stack (firmware start-up). Every step before that is an
+    /// [`Error::NotConfigured`].
+    pub const UNSET: Self = Self {
+        config: ReactionWheelConfig::UNSET,
+        temperature: AdaptiveFilter::UNSET,
+        two_step: TwoStepLoss::UNSET,
+        kalman: LossKalman::UNSET,
+        exposure: ExposureAccumulator::EMPTY,
+        last_reading: None,
+        last: None,
+        configured: false,
+    };
+
     /// A prognoser with particles drawn from the priors.
     pub fn new<R: Rng + ?Sized>(
         config: ReactionWheelConfig<T>,
         rng: &mut R,
     ) -> Result<Self, Error> {
-        let temperature_pf = ParticleFilter::<T, 3, N>::new(
-            Vector3::zeros(),
-            PfConfig {
-                lower: Vector3::new(cast(-5.0), cast(-1000.0), cast(-40.0)),
-                upper: Vector3::new(cast(5.0), cast(1000.0), cast(150.0)),
-                ..PfConfig::default()
-            },
-        )?;
-        let temperature = AdaptiveFilter::new(temperature_pf, config.temperature_filter)?;
+        let mut pipeline = Self::UNSET;
+        pipeline.reset(config, rng)?;
+        Ok(pipeline)
+    }
+
+    /// Re-initialises the prognoser in place to what [`ReactionWheel::new`] builds (the same
+    /// random draws). On an error the pipeline is left unset ([`Error::NotConfigured`] until
+    /// a successful reset).
+    pub fn reset<R: Rng + ?Sized>(
+        &mut self,
+        config: ReactionWheelConfig<T>,
+        rng: &mut R,
+    ) -> Result<(), Error> {
+        self.configured = false;
         let (b0, bs) = config.prior_b;
         let (beta0, betas) = config.prior_beta;
-        let mut ratio_pf = ParticleFilter::<T, 1, M>::new(
-            SVector::from([b0]),
-            loss_config(config.loss_walk.0, T::zero(), cast(150.0)),
-        )?;
-        ratio_pf.init_gaussian(&SVector::from([b0]), &SVector::from([bs]), rng)?;
-        let mut rate_pf = ParticleFilter::<T, 1, M>::new(
-            SVector::from([beta0]),
-            loss_config(config.loss_walk.1, cast(0.01), cast(100.0)),
-        )?;
-        rate_pf.init_gaussian(&SVector::from([beta0]), &SVector::from([betas]), rng)?;
         let beta_unit: T = cast(BETA_UNIT);
-        let kalman = LossKalman::new(
+        self.kalman = LossKalman::new(
             config.loss_kalman,
             b0,
             bs,
@@ -192,17 +194,30 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
                 T::zero()
             },
         )?;
-        Ok(Self {
-            kalman,
-            config,
-            temperature,
-            ratio: AdaptiveFilter::new(ratio_pf, loss_adaptive(cast(4.0)))?,
-            rate: AdaptiveFilter::new(rate_pf, loss_adaptive(cast(0.4)))?,
-            exposure: ExposureAccumulator::default(),
-            previous_interval: None,
-            last_reading: None,
-            last: None,
-        })
+        self.temperature.reset(
+            Vector3::zeros(),
+            PfConfig {
+                lower: Vector3::new(cast(-5.0), cast(-1000.0), cast(-40.0)),
+                upper: Vector3::new(cast(5.0), cast(1000.0), cast(150.0)),
+                ..PfConfig::default()
+            },
+            config.temperature_filter,
+        )?;
+        self.two_step.reset(
+            TwoStepConfig {
+                relative_noise: config.loss_relative_noise,
+                walk: config.loss_walk,
+                prior_b: config.prior_b,
+                prior_beta: config.prior_beta,
+            },
+            rng,
+        )?;
+        self.config = config;
+        self.exposure = ExposureAccumulator::EMPTY;
+        self.last_reading = None;
+        self.last = None;
+        self.configured = true;
+        Ok(())
     }
 
     fn report(
@@ -249,10 +264,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
 
     /// Two-step estimates `(b in degC, beta in mL/s)`.
     pub fn loss_parameters(&self) -> (T, T) {
-        (
-            self.ratio.filter().mean().x,
-            self.rate.filter().mean().x * cast(BETA_UNIT),
-        )
+        self.two_step.parameters()
     }
 
     /// The step-1 filter (particles, summaries).
@@ -271,6 +283,9 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         y: Option<&[T]>,
         rng: &mut R,
     ) -> Result<ReactionWheelReport<T>, Error> {
+        if !self.configured {
+            return Err(Error::NotConfigured);
+        }
         if !t.finite() {
             return Err(Error::InvalidTimeStep);
         }
@@ -365,44 +380,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             Ok(report) => flags.insert(report.flags),
             Err(_) => flags.insert(Flags::MEASUREMENT_REJECTED),
         }
-        let noise = self.config.loss_relative_noise;
-        let u = exposure.as_input();
-        let one = T::one();
-        if let Some((before, previous_consumption)) = self.previous_interval {
-            let bu = before.as_input();
-            let u6 = SVector::<T, 6>::from([u.x, u.y, u.z, bu.x, bu.y, bu.z]);
-            let ratio = consumption / previous_consumption;
-            // A rejected update leaves the filter unchanged (flagged); the next interval retries.
-            let ratio_step = self.ratio.step(
-                &LossRatioModel {
-                    relative_noise: noise,
-                },
-                &u6,
-                Some(&[ratio]),
-                one,
-                T::zero(),
-                rng,
-            );
-            if ratio_step.is_err() {
-                flags.insert(Flags::MEASUREMENT_REJECTED);
-            }
-        }
-        let b_hat = self.ratio.filter().mean().x;
-        let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, b_hat]);
-        let rate_step = self.rate.step(
-            &LossRateModel {
-                relative_noise: noise,
-            },
-            &u4,
-            Some(&[consumption]),
-            one,
-            T::zero(),
-            rng,
-        );
-        if rate_step.is_err() {
-            flags.insert(Flags::MEASUREMENT_REJECTED);
-        }
-        self.previous_interval = Some((exposure, consumption));
+        flags.insert(self.two_step.update(exposure, consumption, rng));
         flags
     }
 
@@ -423,16 +401,14 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         rng: &mut R,
     ) -> Result<Summary<T>, Error> {
         let x0 = self.last_reading.ok_or(Error::InsufficientData)?;
-        for ((s, b), beta) in states
-            .iter_mut()
-            .zip(self.ratio.filter().particles().iter())
-            .zip(self.rate.filter().particles().iter())
-        {
-            *s = Vector3::new(x0, b.x, beta.x);
-        }
         let mut weights = [T::zero(); M];
-        for (i, w) in weights.iter_mut().enumerate() {
-            *w = self.ratio.filter().weight(i) * self.rate.filter().weight(i);
+        for ((s, w), (b, beta, weight)) in states
+            .iter_mut()
+            .zip(weights.iter_mut())
+            .zip(self.two_step.particles())
+        {
+            *s = Vector3::new(x0, b, beta);
+            *w = weight;
         }
         Self::rul_of_states(
             threshold,
@@ -614,5 +590,37 @@ mod tests {
             k.median
         );
         assert!(k.p05 <= k.median && k.median <= k.p95);
+    }
+
+    #[test]
+    fn unset_placeholder_errs_until_reset_and_then_matches_new() {
+        let mut unset = ReactionWheel::<f64, 50, 50>::UNSET;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
+        let y = [0.19, 91.4];
+        assert_eq!(
+            unset.step(0.0, 1.0, Some(&y), &mut rng).unwrap_err(),
+            Error::NotConfigured
+        );
+        // A rejected configuration leaves it unset.
+        let mut bad = ReactionWheelConfig::new(0.03, 0.003).unwrap();
+        bad.prior_b.1 = -1.0;
+        assert!(unset.reset(bad, &mut rng).is_err());
+        assert_eq!(
+            unset.step(0.0, 1.0, Some(&y), &mut rng).unwrap_err(),
+            Error::NotConfigured
+        );
+        // Reset in place draws what `new` draws: the two run bit-identically.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
+        let cfg = ReactionWheelConfig::new(0.03, 0.003).unwrap();
+        unset.reset(cfg, &mut rng).unwrap();
+        let (mut built, mut built_rng) = pipeline();
+        for k in 0..200 {
+            let t = 0.05 * k as f64;
+            let yk = [0.19 + 1e-3 * (k % 7) as f64, 91.4 + 0.01 * k as f64];
+            let a = unset.step(t, 1.0, Some(&yk), &mut rng).unwrap();
+            let b = built.step(t, 1.0, Some(&yk), &mut built_rng).unwrap();
+            assert_eq!(a, b, "step {k}");
+        }
+        assert!(unset.two_step.particles().eq(built.two_step.particles()));
     }
 }

@@ -25,6 +25,7 @@ use nalgebra::{Matrix2, Vector2};
 
 use super::reaction_wheel::{BETA_UNIT, IntervalExposure};
 use crate::random::standard_normal;
+use crate::real::zero_vector;
 use crate::safeguard::{Flags, floor_variances, symmetrise};
 use crate::{Error, Real, cast};
 use rand_core::Rng;
@@ -53,6 +54,18 @@ pub struct LossKalmanConfig<T> {
 }
 
 impl<T: Real> LossKalmanConfig<T> {
+    /// All zeros: the placeholder of [`LossKalman::UNSET`].
+    pub const UNSET: Self = Self {
+        relative_noise: T::ZERO,
+        temperature_std: T::ZERO,
+        walk: zero_vector(),
+        change_drift: T::ZERO,
+        change_threshold: T::ZERO,
+        enhancement: zero_vector(),
+        gate: T::ZERO,
+        noise_adaptation: T::ZERO,
+    };
+
     /// Defaults for 4-minute intervals: slow walks, a gate of 25 (5 sigma), a change declared
     /// on a CUSUM of 30 (two consecutive gated innovations, or a longer run of 3-sigma ones),
     /// enhanced by 10 degC in `b` and 0.1 in `ln beta`.
@@ -130,6 +143,16 @@ pub struct LossKalman<T: Real> {
 }
 
 impl<T: Real> LossKalman<T> {
+    /// An all-zero placeholder for static storage, replaced on reset.
+    pub const UNSET: Self = Self {
+        config: LossKalmanConfig::UNSET,
+        state: zero_vector(),
+        covariance: Matrix2::from_array_storage(nalgebra::ArrayStorage([[T::ZERO; 2]; 2])),
+        cusum: T::ZERO,
+        changes: 0,
+        excess_variance: T::ZERO,
+    };
+
     /// A filter with prior means `b0` (degC) and `beta0` (mL/s) and prior standard deviations
     /// `b_std` (degC) and `beta_rel_std` (relative, i.e. of `ln beta`).
     pub fn new(

@@ -75,6 +75,32 @@ pub struct WheelParams<T> {
 }
 
 impl<T: Real> WheelParams<T> {
+    /// All zeros: the placeholder inside statically allocated pipelines, replaced on reset.
+    pub const UNSET: Self = Self {
+        drive_gain: T::ZERO,
+        driver_bandwidth: T::ZERO,
+        torque_constant: T::ZERO,
+        back_emf: T::ZERO,
+        speed_limiter_gain: T::ZERO,
+        overspeed: T::ZERO,
+        coulomb_friction: T::ZERO,
+        inertia: T::ZERO,
+        poles: T::ZERO,
+        torque_ripple: T::ZERO,
+        cogging: T::ZERO,
+        input_resistance: T::ZERO,
+        voltage_feedback_gain: T::ZERO,
+        noise_angle: T::ZERO,
+        noise_frequency: T::ZERO,
+        bus_voltage: T::ZERO,
+        bridge_resistance: T::ZERO,
+        quiescent_power: T::ZERO,
+        viscous_base: T::ZERO,
+        viscous_slope: T::ZERO,
+        viscous_floor: T::ZERO,
+        coulomb_smoothing: T::ZERO,
+    };
+
     /// Table 2 with the readings of `docs/deviations.md`.
     pub fn ithaco_type_a() -> Self {
         Self {
@@ -244,6 +270,19 @@ pub struct WheelTemperatureModel<T> {
 }
 
 impl<T: Real> WheelTemperatureModel<T> {
+    /// All zeros: the placeholder inside statically allocated pipelines, replaced on reset.
+    pub const UNSET: Self = Self {
+        wheel: WheelParams::UNSET,
+        noise_phase: T::ZERO,
+        include_torque_noise: false,
+        temperature_walk: T::ZERO,
+        speed_process_std: T::ZERO,
+        current_process_std: T::ZERO,
+        current_sensor_std: T::ZERO,
+        speed_sensor_std: T::ZERO,
+        substeps: 0,
+    };
+
     /// The model with the given sensor noise and default process noise.
     pub fn new(current_sensor_std: T, speed_sensor_std: T) -> Result<Self, Error> {
         if !(current_sensor_std.finite() && current_sensor_std > T::zero()) {
@@ -348,6 +387,23 @@ impl<T: Real> Stochastic<T, 3, 2> for WheelTemperatureModel<T> {
             &[self.current_sensor_std, self.speed_sensor_std],
         )
     }
+
+    fn predicted_measurement(
+        &self,
+        x: &Vector3<T>,
+        _u: &Vector2<T>,
+        predicted: &mut [T],
+        noise_variance: &mut [T],
+    ) -> bool {
+        let (i, w) = (self.current_sensor_std, self.speed_sensor_std);
+        for (slot, v) in predicted.iter_mut().zip([x.x, x.y]) {
+            *slot = v;
+        }
+        for (slot, v) in noise_variance.iter_mut().zip([i * i, w * w]) {
+            *slot = v;
+        }
+        true
+    }
 }
 
 /// Lubricant loss rate of Eq. 7 without noise: `beta exp(-b / T)` (mL/s, T in degC).
@@ -418,16 +474,19 @@ pub struct ExposureAccumulator<T> {
 
 impl<T: Real> Default for ExposureAccumulator<T> {
     fn default() -> Self {
-        Self {
-            duration: T::zero(),
-            count: 0,
-            mean: T::zero(),
-            m2: T::zero(),
-        }
+        Self::EMPTY
     }
 }
 
 impl<T: Real> ExposureAccumulator<T> {
+    /// No samples yet.
+    pub const EMPTY: Self = Self {
+        duration: T::ZERO,
+        count: 0,
+        mean: T::ZERO,
+        m2: T::ZERO,
+    };
+
     /// Adds a temperature held for `dt` seconds. Rejects non-positive or non-finite values.
     pub fn push(&mut self, temperature_c: T, dt: T) -> Result<(), Error> {
         crate::error::check_dt(dt)?;

@@ -35,6 +35,27 @@ pub const NS: usize = 2 * NX + 1;
 /// Measurements: rear-wheel speed, body speed, front-wheel speed.
 pub const NY: usize = 3;
 
+/// Angle (rad) beyond which [`rebase_angles`] moves the angle reference: about five wheel
+/// turns, so that in f32 the angles keep a resolution of a few microradians.
+pub const REBASE_ANGLE: f64 = 32.0;
+
+/// Only the shaft twists `theta_r - s_m / N4` and `s_m / N4 - theta_f` enter the dynamics, so
+/// the angles may be measured from any common reference. When `|theta_f|` exceeds
+/// [`REBASE_ANGLE`], this moves the reference to the front wheel's angle: `theta_f` becomes
+/// 0, `theta_r` and `s_m / N4` drop by the same amount (the twists change only by the
+/// rounding of `N4 * theta_f`). Without it the absolute angles grow without bound and lose
+/// their resolution (in f32 after a few hours of riding). Returns whether it shifted.
+pub fn rebase_angles<T: Real>(theta_r: &mut T, s_m: &mut T, theta_f: &mut T, n4: T) -> bool {
+    let reference = *theta_f;
+    if !(reference.abs() > cast::<T>(REBASE_ANGLE)) {
+        return false;
+    }
+    *theta_r -= reference;
+    *s_m -= n4 * reference;
+    *theta_f = T::zero();
+    true
+}
+
 /// Physical parameters (Table 3 nominal values by default).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScooterParams<T> {
@@ -270,6 +291,42 @@ mod tests {
         let y = model.observe(&x, &u);
         assert!((y[0] - 0.78 * x[OMEGA_R]).abs() < 1e-12);
         assert!(y[0] < 0.8 * steady_rear_speed(&model.params, 1.0, model.params.r_rv));
+    }
+
+    #[test]
+    fn rebased_angles_leave_the_dynamics_unchanged() {
+        let model = ScooterModel::<f64>::nominal();
+        let mut x = model.nominal_state();
+        let u = Vector1::new(1.0);
+        for _ in 0..1500 {
+            x = model.step(&x, &u, 0.02);
+        }
+        assert!(x[THETA_F] > REBASE_ANGLE, "{}", x[THETA_F]);
+        let mut shifted = x;
+        let (mut a, mut b, mut c) = (shifted[THETA_R], shifted[S_M], shifted[THETA_F]);
+        assert!(rebase_angles(&mut a, &mut b, &mut c, model.params.n4));
+        (shifted[THETA_R], shifted[S_M], shifted[THETA_F]) = (a, b, c);
+        assert_eq!(shifted[THETA_F], 0.0);
+        let twists = |x: &SVector<f64, NX>| {
+            let s = x[S_M] / model.params.n4;
+            (x[THETA_R] - s, s - x[THETA_F])
+        };
+        let (t1, t2) = (twists(&x), twists(&shifted));
+        assert!((t1.0 - t2.0).abs() < 1e-12 && (t1.1 - t2.1).abs() < 1e-12);
+        // Velocities after another 10 s agree to round-off; the angles differ by the shift.
+        let (mut p, mut q) = (x, shifted);
+        for _ in 0..500 {
+            p = model.step(&p, &u, 0.02);
+            q = model.step(&q, &u, 0.02);
+        }
+        for i in [OMEGA_R, V_M, OMEGA_F] {
+            assert!((p[i] - q[i]).abs() < 1e-9, "{i}: {} {}", p[i], q[i]);
+        }
+        assert!((p[THETA_F] - q[THETA_F] - x[THETA_F]).abs() < 1e-9);
+        // Small angles are left alone.
+        let (mut a, mut b, mut c) = (1.0, 0.1, 1.0);
+        assert!(!rebase_angles(&mut a, &mut b, &mut c, 0.115));
+        assert_eq!((a, b, c), (1.0, 0.1, 1.0));
     }
 
     #[test]

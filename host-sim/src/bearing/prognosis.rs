@@ -5,10 +5,12 @@
 
 use super::train::{GP_INPUTS, GP_POINTS};
 use super::trial::Trial;
-use nalgebra::{Matrix1, SVector, Vector1};
+use nalgebra::{Matrix1, SMatrix, SVector, Vector1};
 use prognos_core::filter::imm::{Imm, ModeFilter};
 use prognos_core::filter::ukf::SigmaParams;
 use prognos_core::learn::gp::{GaussianProcess, GpTransition, GpUkf, StateThreshold, sample_rul};
+use prognos_core::learn::gp_rate::{RateScaledGpUkf, RateScaledTransition};
+use prognos_core::model::Stochastic;
 use prognos_core::prognose::rul_distribution;
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -16,6 +18,8 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 /// The bearing GP predictor.
 pub type BearingGp = GaussianProcess<f64, GP_INPUTS, GP_POINTS>;
 type Filter<'a> = GpUkf<'a, f64, 1, 1, GP_INPUTS, GP_POINTS, 3>;
+type RateFilter<'a, const NX: usize, const NS: usize> =
+    RateScaledGpUkf<'a, f64, NX, 1, GP_INPUTS, GP_POINTS, NS>;
 
 /// Prognosis settings.
 #[derive(Clone, Copy, Debug)]
@@ -76,6 +80,41 @@ pub struct TrialPrognosis {
     pub extrapolating_cycles: usize,
 }
 
+/// A mode of the bearing IMM: a GP-UKF (state `r`) or the rate-scaled GP-UKF (state
+/// `[r, theta]`), with the transition its RUL samples are propagated through.
+pub trait BearingMode<const NX: usize>: ModeFilter<f64, NX, Input = Vector1<f64>> {
+    type Transition: Stochastic<f64, NX, 1>;
+    fn rul_transition(&self) -> &Self::Transition;
+    /// Whether the GP is queried outside its training range at the current estimate.
+    fn extrapolating(&self, u: &Vector1<f64>) -> bool;
+}
+
+impl<'a> BearingMode<1> for Filter<'a> {
+    type Transition = GpTransition<'a, f64, GP_INPUTS, GP_POINTS, 1>;
+    fn rul_transition(&self) -> &Self::Transition {
+        self.transition()
+    }
+    fn extrapolating(&self, u: &Vector1<f64>) -> bool {
+        self.transition()
+            .predict(self.state(), u)
+            .map(|p| p.2)
+            .unwrap_or(true)
+    }
+}
+
+impl<'a, const NX: usize, const NS: usize> BearingMode<NX> for RateFilter<'a, NX, NS> {
+    type Transition = RateScaledTransition<'a, f64, GP_INPUTS, GP_POINTS>;
+    fn rul_transition(&self) -> &Self::Transition {
+        self.transition()
+    }
+    fn extrapolating(&self, u: &Vector1<f64>) -> bool {
+        self.transition()
+            .predict(self.state(), u)
+            .map(|p| p.extrapolating)
+            .unwrap_or(true)
+    }
+}
+
 /// Runs an IMM of `K` GP-UKFs (K = 1 is the plain GP-UKF) over `trial` up to its EOL.
 pub fn prognose<const K: usize>(
     gps: [&BearingGp; K],
@@ -105,10 +144,69 @@ pub fn prognose<const K: usize>(
         }
         v.try_into().map_err(|_| anyhow::anyhow!("filter count"))?
     };
-    let mut imm: Imm<f64, Filter<'_>, 1, K> = Imm::new(
+    prognose_with(filters, trial, settings)
+}
+
+/// Prior of a unit's log-rate polynomial `theta` relative to one GP (from the training
+/// units), as a state prior whose entry 0 (the feature) the prognosis sets from the first
+/// measurement.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RatePrior<const NX: usize> {
+    pub mean: SVector<f64, NX>,
+    pub covariance: SMatrix<f64, NX, NX>,
+    /// Damage at which `theta_0` is the log rate.
+    pub pivot: f64,
+}
+
+/// Runs an IMM of `K` rate-scaled GP-UKFs (state `[r, theta..]`, `theta` starting at each
+/// GP's prior) over `trial`; `rate_walk_variance` is the per-cycle random walk of `theta`.
+pub fn prognose_rate_scaled<const NX: usize, const NS: usize, const K: usize>(
+    gps: [(&BearingGp, RatePrior<NX>); K],
+    rate_walk_variance: f64,
+    trial: &Trial,
+    settings: &PrognosisSettings,
+) -> anyhow::Result<TrialPrognosis> {
+    let r = settings.measurement_variance;
+    let z0 = trial.feature[0];
+    let filters: [RateFilter<'_, NX, NS>; K] = {
+        let mut v = Vec::with_capacity(K);
+        for (gp, prior) in gps.iter() {
+            let (mut x0, mut p0) = (prior.mean, prior.covariance);
+            x0[0] = z0;
+            p0.row_mut(0).fill(0.0);
+            p0.column_mut(0).fill(0.0);
+            p0[(0, 0)] = r;
+            v.push(
+                RateScaledGpUkf::new(
+                    RateScaledTransition {
+                        gp: *gp,
+                        measurement_std: r.sqrt(),
+                        pivot: prior.pivot,
+                    },
+                    x0,
+                    p0,
+                    r,
+                    rate_walk_variance,
+                    SigmaParams::default(),
+                )
+                .map_err(|e| anyhow::anyhow!("{e}"))?,
+            );
+        }
+        v.try_into().map_err(|_| anyhow::anyhow!("filter count"))?
+    };
+    prognose_with(filters, trial, settings)
+}
+
+/// The filtering and prediction loop shared by both kinds of mode.
+fn prognose_with<const NX: usize, const K: usize, F: BearingMode<NX>>(
+    filters: [F; K],
+    trial: &Trial,
+    settings: &PrognosisSettings,
+) -> anyhow::Result<TrialPrognosis> {
+    let mut imm: Imm<f64, F, NX, K> = Imm::new(
         filters,
         SVector::from([1.0 / K as f64; K]),
-        Imm::<f64, Filter<'_>, 1, K>::uniform_switching(settings.stay_probability),
+        Imm::<f64, F, NX, K>::uniform_switching(settings.stay_probability),
     )
     .map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed ^ trial.seed);
@@ -124,18 +222,13 @@ pub fn prognose<const K: usize>(
         estimates: vec![imm.state()[0]],
         extrapolating_cycles: 0,
     };
-    let mut states = vec![Vector1::new(0.0); n];
+    let mut states = vec![SVector::<f64, NX>::zeros(); n];
     let mut times = vec![0.0; n * K];
     let mut weights = vec![0.0; n * K];
     let mut buf = vec![(0.0, 0.0); n * K];
     for k in 1..trial.eol {
         let u = Vector1::new(trial.load_diff[k - 1]);
-        if imm.filters().iter().any(|f| {
-            f.transition()
-                .predict(f.state(), &u)
-                .map(|p| p.2)
-                .unwrap_or(true)
-        }) {
+        if imm.filters().iter().any(|f| f.extrapolating(&u)) {
             out.extrapolating_cycles += 1;
         }
         imm.step(&u, &[trial.feature[k]])
@@ -166,7 +259,7 @@ pub fn prognose<const K: usize>(
             }
             let load = &trial.load_diff;
             let res = sample_rul(
-                f.transition(),
+                f.rul_transition(),
                 &f.mode_state(),
                 &f.mode_covariance(),
                 &threshold,

@@ -1,9 +1,12 @@
 //! Anger et al. 2012 Tables 4-6 on four generated trials, and a campaign of many generated
 //! trials (train on a few, test on the rest).
 
-use super::prognosis::{BearingGp, PrognosisSettings, TrialMetrics, metrics, prognose};
-use super::train::{Dataset, GP_POINTS, feature_noise_variance, train};
+use super::prognosis::{
+    BearingGp, PrognosisSettings, RatePrior, TrialMetrics, metrics, prognose, prognose_rate_scaled,
+};
+use super::train::{Dataset, GP_POINTS, feature_noise_variance, rate_prior, train};
 use super::trial::{Trial, TrialGenerator};
+use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 use std::fmt::Write as _;
 
@@ -89,6 +92,35 @@ fn run<const K: usize>(
     s: &PrognosisSettings,
 ) -> anyhow::Result<TrialMetrics> {
     metrics(&prognose(gps, t, s)?).ok_or_else(|| anyhow::anyhow!("no predictions"))
+}
+
+/// Per-cycle random-walk variance of the rate state (std 0.003 per cycle, about 0.05 over a
+/// life: the rate is a property of the unit and drifts only slowly).
+pub const RATE_WALK_VARIANCE: f64 = 1e-5;
+/// Damage at which the rate-tilt polynomial is centred (middle of the feature range).
+pub const RATE_PIVOT: f64 = 0.5;
+
+/// The state prior of the rate-scaled GP-UKF with `NX - 1` log-rate terms, from the training
+/// units' rates relative to `gp` (see [`rate_prior`]).
+pub fn rate_state_prior<const NX: usize>(
+    gp: &BearingGp,
+    training: &[&Trial],
+) -> anyhow::Result<RatePrior<NX>> {
+    let fit = rate_prior::<NX>(gp, training, RATE_PIVOT, 0.0)?;
+    let (mean, cov) = (&fit.mean, &fit.covariance);
+    let mut m = SVector::<f64, NX>::zeros();
+    let mut c = SMatrix::<f64, NX, NX>::zeros();
+    for i in 0..NX - 1 {
+        m[i + 1] = mean[i];
+        for j in 0..NX - 1 {
+            c[(i + 1, j + 1)] = cov[i][j];
+        }
+    }
+    Ok(RatePrior {
+        mean: m,
+        covariance: c,
+        pivot: RATE_PIVOT,
+    })
 }
 
 fn summarise(label: &str, rows: &[TrialMetrics]) -> CampaignRow {
@@ -207,12 +239,40 @@ pub fn tables(generator: &TrialGenerator, campaign: CampaignConfig) -> anyhow::R
         None
     };
     let pooled_rows = eval(&|t| run([&*pooled], t, &c_settings))?;
+    let rate_prior2 = rate_state_prior::<2>(&pooled, &train_refs)?;
+    let rate_prior3 = rate_state_prior::<3>(&pooled, &train_refs)?;
+    let metrics_of =
+        |p: anyhow::Result<_>| metrics(&p?).ok_or_else(|| anyhow::anyhow!("no predictions"));
+    let rate_rows = eval(&|t| {
+        metrics_of(prognose_rate_scaled::<2, 5, 1>(
+            [(&*pooled, rate_prior2)],
+            RATE_WALK_VARIANCE,
+            t,
+            &c_settings,
+        ))
+    })?;
+    let tilt_rows = eval(&|t| {
+        metrics_of(prognose_rate_scaled::<3, 7, 1>(
+            [(&*pooled, rate_prior3)],
+            RATE_WALK_VARIANCE,
+            t,
+            &c_settings,
+        ))
+    })?;
     let mut rows = vec![
         summarise("GP-UKF, trained on 1 trial", &single),
         summarise("IMM of 2 GP-UKFs (paper's set-up)", &imm2),
         summarise("IMM of 8 GP-UKFs (one per training trial)", &imm8),
         summarise("IMM of 8 GP-UKFs, stay probability 0.998", &imm8_sticky),
         summarise("GP-UKF, one GP on all training trials", &pooled_rows),
+        summarise(
+            "GP-UKF with online log-rate state, one GP on all training trials",
+            &rate_rows,
+        ),
+        summarise(
+            "GP-UKF with online log-rate and rate-tilt states, one GP on all training trials",
+            &tilt_rows,
+        ),
     ];
     if let Some(r) = imm16_sticky {
         rows.push(summarise("IMM of 16 GP-UKFs, stay probability 0.998", &r));

@@ -186,3 +186,105 @@ fn imm_of_gp_ukfs_picks_the_model_that_generates_the_data() {
     }
     assert!(right as f64 >= 0.9 * counted as f64, "{right} of {counted}");
 }
+
+#[test]
+fn rate_state_learns_an_unseen_units_rate_where_the_plain_gp_ukf_cannot() {
+    use prognos_core::learn::gp_rate::{RateScaledGpUkf, RateScaledTransition};
+    // The GP learned `known`; the unit degrades 1.4 times faster (theta = ln 1.4 = 0.34).
+    let (_, gp) = trained(known, 8);
+    let faster = |r: f64, du: f64| 1.4 * known(r, du);
+    let std = 0.02;
+    let mut plain: GpUkf<f64, 1, 1, 2, GP_POINTS, 3> = GpUkf::new(
+        GpTransition {
+            gps: [&*gp],
+            measurement_std: Vector1::new(std),
+        },
+        Vector1::new(0.0),
+        Matrix1::new(std * std),
+        Matrix1::new(std * std),
+        SigmaParams::default(),
+    )
+    .unwrap();
+    let mut rated: RateScaledGpUkf<f64, 2, 1, 2, GP_POINTS, 5> = RateScaledGpUkf::new(
+        RateScaledTransition {
+            gp: &*gp,
+            measurement_std: std,
+            pivot: 0.5,
+        },
+        Vector2::new(0.0, 0.0),
+        nalgebra::Matrix2::new(std * std, 0.0, 0.0, 0.1),
+        std * std,
+        1e-5,
+        SigmaParams::default(),
+    )
+    .unwrap();
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
+    let du: Vec<f64> = (0..300)
+        .map(|_| 0.4 * uniform01::<f64, _>(&mut rng))
+        .collect();
+    let mut r = 0.0;
+    let mut k = 0;
+    while r < 0.5 {
+        r += faster(r, du[k]);
+        let z = r + std * standard_normal::<f64, _>(&mut rng);
+        plain.step(&Vector1::new(du[k]), &[z]).unwrap();
+        rated.step(&Vector1::new(du[k]), &[z]).unwrap();
+        k += 1;
+    }
+    let theta = rated.state()[1];
+    assert!((theta - 1.4f64.ln()).abs() < 0.1, "theta {theta}");
+    let (mut rt, mut steps) = (r, 0usize);
+    while rt < 1.0 {
+        rt += faster(rt, du[k + steps]);
+        steps += 1;
+    }
+    let threshold = StateThreshold {
+        index: 0,
+        level: 1.0,
+    };
+    let median = |times: &[f64]| {
+        let mut buf = vec![(0.0, 0.0); times.len()];
+        rul_distribution(times, &vec![1.0; times.len()], &mut buf)
+            .unwrap()
+            .median
+    };
+    let mut times = vec![0.0; 200];
+    let mut states1 = vec![Vector1::new(0.0); 200];
+    sample_rul(
+        plain.transition(),
+        plain.state(),
+        plain.covariance(),
+        &threshold,
+        |s| Vector1::new(du[k + s as usize]),
+        1000,
+        &mut rng,
+        &mut states1,
+        &mut times,
+    )
+    .unwrap();
+    let plain_median = median(&times);
+    let mut states2 = vec![Vector2::new(0.0, 0.0); 200];
+    sample_rul(
+        rated.transition(),
+        rated.state(),
+        rated.covariance(),
+        &threshold,
+        |s| Vector1::new(du[k + s as usize]),
+        1000,
+        &mut rng,
+        &mut states2,
+        &mut times,
+    )
+    .unwrap();
+    let rated_median = median(&times);
+    let truth = steps as f64;
+    assert!(
+        (rated_median - truth).abs() <= 0.1 * truth,
+        "rate state: median {rated_median}, true {truth}"
+    );
+    // The fixed-rate GP-UKF keeps the training unit's pace: about 1.4 times too long.
+    assert!(
+        plain_median > 1.2 * truth,
+        "plain: median {plain_median}, true {truth}"
+    );
+}

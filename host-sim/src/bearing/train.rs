@@ -68,6 +68,85 @@ pub fn feature_noise_variance(trials: &[&Trial]) -> f64 {
     s / n.max(1) as f64
 }
 
+/// The training units' log-rate terms and the prior they give (see [`rate_prior`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RatePriorFit {
+    /// `[theta_0, ..]` of each training unit.
+    pub per_trial: Vec<Vec<f64>>,
+    pub mean: Vec<f64>,
+    pub covariance: Vec<Vec<f64>>,
+}
+
+/// Log-rate polynomial of each training unit relative to `gp` and the prior it gives for an
+/// unseen unit. A unit's course (low-passed) is cut at `pivot` into a low and a high part; in
+/// each, `ln(sum dr / sum mu(r, du))` is how much faster the unit went than the GP's mean
+/// increments say. `NX = 2`: `theta_0` = the whole course's ratio; `NX = 3`: `theta_0` is the
+/// line through the two parts' (mean r, ratio) at `pivot`, `theta_1` its slope. Returns each
+/// unit's `[theta..]` and the prior (mean, covariance over the units with the diagonal
+/// floored at `min_variance`: a few training units understate the population's spread).
+pub fn rate_prior<const NX: usize>(
+    gp: &prognos_core::learn::gp::GaussianProcess<f64, GP_INPUTS, GP_POINTS>,
+    trials: &[&Trial],
+    pivot: f64,
+    min_variance: f64,
+) -> anyhow::Result<RatePriorFit> {
+    anyhow::ensure!((2..=3).contains(&NX), "rate prior for NX = 2 or 3");
+    let mut all = Vec::with_capacity(trials.len());
+    for t in trials {
+        let r = zero_phase_lowpass(&t.feature, TRAINING_SMOOTHING);
+        // [part][progress, predicted, sum r, count]
+        let mut acc = [[0.0f64; 4]; 2];
+        for k in 0..t.eol.min(r.len() - 1) {
+            let p = gp
+                .predict(&nalgebra::Vector2::new(r[k], t.load_diff[k]))
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let part = &mut acc[usize::from(NX == 3 && r[k] >= pivot)];
+            part[0] += r[k + 1] - r[k];
+            part[1] += p.mean;
+            part[2] += r[k];
+            part[3] += 1.0;
+        }
+        let ratio = |a: &[f64; 4]| {
+            anyhow::ensure!(
+                a[0] > 0.0 && a[1] > 0.0,
+                "trial {} does not degrade under the GP",
+                t.seed
+            );
+            Ok((a[0] / a[1]).ln())
+        };
+        let theta = if NX == 2 {
+            vec![ratio(&acc[0])?]
+        } else {
+            let (lo, hi) = (ratio(&acc[0])?, ratio(&acc[1])?);
+            let (rlo, rhi) = (acc[0][2] / acc[0][3], acc[1][2] / acc[1][3]);
+            let slope = (hi - lo) / (rhi - rlo).max(1e-3);
+            vec![lo + slope * (pivot - rlo), slope]
+        };
+        all.push(theta);
+    }
+    let n = all.len() as f64;
+    let dim = NX - 1;
+    let mean: Vec<f64> = (0..dim)
+        .map(|i| all.iter().map(|v| v[i]).sum::<f64>() / n)
+        .collect();
+    let mut cov = vec![vec![0.0; dim]; dim];
+    for v in &all {
+        for i in 0..dim {
+            for j in 0..dim {
+                cov[i][j] += (v[i] - mean[i]) * (v[j] - mean[j]) / (n - 1.0).max(1.0);
+            }
+        }
+    }
+    for (i, row) in cov.iter_mut().enumerate() {
+        row[i] = row[i].max(min_variance);
+    }
+    Ok(RatePriorFit {
+        per_trial: all,
+        mean,
+        covariance: cov,
+    })
+}
+
 /// Hyperparameters of the SE-ARD GP.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hyper {
