@@ -152,7 +152,11 @@ pub enum Command {
     /// folder of labelled datasets) and prints attribution, localisation and shrink.
     GapBench {
         /// Plants to generate for (comma separated).
-        #[arg(long, default_value = "reaction_wheel,dc_motor", value_delimiter = ',')]
+        #[arg(
+            long,
+            default_value = "reaction_wheel,valve,scooter,dc_motor",
+            value_delimiter = ','
+        )]
         plants: Vec<String>,
         /// Seeds per effect and ratio.
         #[arg(long, default_value_t = 3)]

@@ -95,6 +95,29 @@ fn gap_says_none_on_nominal_motor_data() {
     assert_eq!(o.verdict, "none", "top 3: {:?}", o.top3);
 }
 
+#[test]
+fn gap_finds_the_scooter_encoder_efficiency_under_its_own_name() {
+    // The rear encoder's efficiency is a sensor scale of y:rear_speed; the scooter names it,
+    // so the generic candidate stands aside and the verdict is the plant's effect.
+    let d = one("scooter", "encoder_efficiency", 4.0);
+    assert_eq!(d.label.channel.as_deref(), Some("y:rear_speed"));
+    let o = run_one(&d).unwrap();
+    assert_eq!(o.verdict, "encoder_efficiency", "top 3: {:?}", o.top3);
+    assert_eq!(o.channel, "y:rear_speed");
+    assert!(o.shrink > 0.8, "shrink {}", o.shrink);
+    assert!(!o.top3.iter().any(|e| e == "sensor_scale:rear_speed"));
+}
+
+#[test]
+fn gap_finds_a_coarse_quantiser_by_likelihood_on_motor_data() {
+    // Steps of about seven noise std: the noise estimated from the data absorbs the
+    // quantiser's variance, so only the quantised likelihood shows it.
+    let d = one("dc_motor", "quantisation", 2.0);
+    let o = run_one(&d).unwrap();
+    assert_eq!(o.verdict, d.label.effects[0], "top 3: {:?}", o.top3);
+    assert_eq!(Some(o.channel.as_str()), d.label.channel.as_deref());
+}
+
 fn bad(dir: &Path, csv_text: &str, meta_text: Option<&str>) -> (i32, String) {
     let csv = dir.join("data.csv");
     std::fs::write(&csv, csv_text).unwrap();

@@ -10,7 +10,8 @@
 //! `brush_drop` (`V_b`, the brush contact voltage drop); both are off in the nominal model.
 
 use crate::gap::plant::{
-    EffectSpec, FitRange, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
+    EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, motion_regimes,
+    param,
 };
 use std::collections::BTreeMap;
 
@@ -70,28 +71,22 @@ pub const DC_MOTOR_PARAMETERS: &[ParamSpec] = &[
 /// The motor's own catalogue.
 pub fn dc_motor_effects() -> Vec<EffectSpec> {
     vec![
-        EffectSpec {
-            name: "coulomb_friction",
-            doc: "dry friction tau_c sign(w)",
-            fit: vec![FitRange {
-                name: "coulomb_friction",
-                lo: 1e-7,
-                hi: 1.0,
-                scale: Scale::Log,
-            }],
-            needs_inputs: Vec::new(),
-        },
-        EffectSpec {
-            name: "brush_drop",
-            doc: "brush contact drop V_b sign(i)",
-            fit: vec![FitRange {
-                name: "brush_drop",
-                lo: 1e-4,
-                hi: 5.0,
-                scale: Scale::Log,
-            }],
-            needs_inputs: Vec::new(),
-        },
+        EffectSpec::single(
+            "coulomb_friction",
+            "dry friction tau_c sign(w)",
+            "coulomb_friction",
+            1e-7,
+            1.0,
+            Scale::Log,
+        ),
+        EffectSpec::single(
+            "brush_drop",
+            "brush contact drop V_b sign(i)",
+            "brush_drop",
+            1e-4,
+            5.0,
+            Scale::Log,
+        ),
     ]
 }
 
@@ -201,51 +196,11 @@ impl GapPlant for DcMotorPlant {
     }
 
     fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {
-        let n = data.len();
-        let w = &nominal.outputs[1];
-        let i = &nominal.outputs[0];
-        let w_max = w.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-9);
-        let accel: Vec<f64> = (0..n)
-            .map(|k| {
-                let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
-                if b > a {
-                    (w[b] - w[a]) / (data.t[b] - data.t[a])
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let a_max = accel.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-9);
-        let mask = |f: &dyn Fn(usize) -> bool| (0..n).map(f).collect::<Vec<bool>>();
-        vec![
-            Regime {
-                label: "zero_crossing".into(),
-                mask: mask(&|k| w[k].abs() < 0.05 * w_max),
-            },
-            Regime {
-                label: "low_speed".into(),
-                mask: mask(&|k| w[k].abs() < 0.2 * w_max),
-            },
-            Regime {
-                label: "high_speed".into(),
-                mask: mask(&|k| w[k].abs() > 0.7 * w_max),
-            },
-            Regime {
-                label: "reverse".into(),
-                mask: mask(&|k| w[k] < 0.0),
-            },
-            Regime {
-                label: "accelerating".into(),
-                mask: mask(&|k| accel[k].abs() > 0.1 * a_max),
-            },
-            Regime {
-                label: "steady".into(),
-                mask: mask(&|k| accel[k].abs() <= 0.1 * a_max),
-            },
-            Regime {
-                label: "braking".into(),
-                mask: mask(&|k| i[k] * w[k] < 0.0),
-            },
-        ]
+        let (i, w) = (&nominal.outputs[0], &nominal.outputs[1]);
+        let mut out = motion_regimes(&data.t, w, w, None);
+        out.push(Regime::from_fn("braking", data.len(), |k| {
+            i[k] * w[k] < 0.0
+        }));
+        out
     }
 }

@@ -326,6 +326,13 @@ pub fn diagnose_with(
     problem.refit_nominal();
     let report = analyse(&problem);
     let (verdict, ranking, pairs) = decide(&problem, &report);
+    let mut report = report;
+    if !report.location.significant {
+        // No test located the gap; a sensor effect in the verdict names its channel.
+        if let Some(channel) = verdict_channel(&verdict, &problem.outputs) {
+            report.location.channel = format!("y:{channel}");
+        }
+    }
     let overlays = overlays(
         &problem,
         &report,
@@ -349,6 +356,15 @@ pub fn diagnose_with(
         spectrum: report.spectrum.clone(),
         overlays,
     })
+}
+
+/// The channel of a single generic verdict (`kind:channel`), if it is one of `outputs`.
+fn verdict_channel<'a>(verdict: &str, outputs: &'a [String]) -> Option<&'a str> {
+    let (_, channel) = verdict.split_once(':')?;
+    if verdict.contains('+') {
+        return None;
+    }
+    outputs.iter().find(|o| *o == channel).map(String::as_str)
 }
 
 /// A plant restricted to the measured subset of its outputs.
@@ -463,7 +479,10 @@ pub fn decide(
         .filter_map(|c| problem.fit(std::slice::from_ref(c), None))
         .collect();
     evaluated.sort_by(|a, b| b.score.total_cmp(&a.score));
-    let explains = |e: &Evaluation| e.score >= MIN_SCORE && e.shrink >= EXPLAIN_SHRINK;
+    let resolution = problem.gap_resolution();
+    let explains = |e: &Evaluation| {
+        e.score >= MIN_SCORE && (e.shrink >= EXPLAIN_SHRINK || e.gap_before < resolution)
+    };
     let Some(best) = evaluated.first().cloned() else {
         return ("unknown".into(), evaluated, Vec::new());
     };
@@ -477,7 +496,7 @@ pub fn decide(
         };
         return (verdict, evaluated, Vec::new());
     }
-    if explains(&best) && best.shrink >= PAIR_TRIGGER {
+    if explains(&best) && (best.shrink >= PAIR_TRIGGER || best.gap_before < resolution) {
         return (best.effect.clone(), evaluated, Vec::new());
     }
     // Forward step: every other candidate added to the best single effect, both fitted

@@ -20,7 +20,8 @@ pub enum GenericKind {
     SensorBias,
     /// `y = (1 + s) y_model`.
     SensorScale,
-    /// `y = q round(y_model / q)`.
+    /// `y = q round((y_model + e) / q)` with sensor noise `e` of std `s` before the
+    /// quantiser; predicted by its conditional mean (see [`quantised_mean`]).
     Quantisation,
     /// `y(t) = y_model(t - d)`.
     MeasurementDelay,
@@ -62,45 +63,50 @@ impl GenericKind {
         Self::ALL.iter().copied().find(|k| k.name() == name)
     }
 
-    /// Parameter name in the ranking.
-    pub fn param_name(self) -> &'static str {
+    /// Parameter names in the ranking.
+    pub fn param_names(self) -> &'static [&'static str] {
         match self {
-            GenericKind::SensorBias => "bias",
-            GenericKind::SensorScale => "scale_error",
-            GenericKind::Quantisation => "step",
-            GenericKind::MeasurementDelay => "delay_s",
-            GenericKind::OutputSaturation => "limit",
-            GenericKind::DeadZone => "width",
-            GenericKind::FirstOrderLag => "tau_s",
+            GenericKind::SensorBias => &["bias"],
+            GenericKind::SensorScale => &["scale_error"],
+            GenericKind::Quantisation => &["step", "noise_std"],
+            GenericKind::MeasurementDelay => &["delay_s"],
+            GenericKind::OutputSaturation => &["limit"],
+            GenericKind::DeadZone => &["width"],
+            GenericKind::FirstOrderLag => &["tau_s"],
         }
     }
 
-    /// Search range for a channel whose replayed output reaches `amplitude` (max |y|),
-    /// whose measurements span `span` and whose noise is `sigma`.
-    pub fn range(self, amplitude: f64, span: f64, sigma: f64, dt: f64) -> (f64, f64, Scale) {
+    /// Search ranges (one per parameter) for a channel whose replayed output reaches
+    /// `amplitude` (max |y|), whose measurements span `span` and whose noise is `sigma`.
+    pub fn ranges(self, amplitude: f64, span: f64, sigma: f64, dt: f64) -> Vec<(f64, f64, Scale)> {
         let a = amplitude.max(sigma);
         match self {
             GenericKind::SensorBias => {
                 let b = (0.5 * span).max(10.0 * sigma);
-                (-b, b, Scale::Linear)
+                vec![(-b, b, Scale::Linear)]
             }
-            GenericKind::SensorScale => (-0.5, 0.5, Scale::Linear),
-            GenericKind::Quantisation => (0.05 * sigma, (0.25 * span).max(sigma), Scale::Log),
-            GenericKind::MeasurementDelay => (0.0, 25.0 * dt, Scale::Linear),
-            GenericKind::OutputSaturation => (0.05 * a, a, Scale::Linear),
-            GenericKind::DeadZone => (1e-4 * a, 0.5 * a, Scale::Log),
-            GenericKind::FirstOrderLag => (0.1 * dt, 200.0 * dt, Scale::Log),
+            GenericKind::SensorScale => vec![(-0.5, 0.5, Scale::Linear)],
+            GenericKind::Quantisation => vec![
+                (0.05 * sigma, (0.25 * span).max(sigma), Scale::Log),
+                (1e-3 * sigma, 2.0 * sigma, Scale::Log),
+            ],
+            GenericKind::MeasurementDelay => vec![(0.0, 25.0 * dt, Scale::Linear)],
+            GenericKind::OutputSaturation => vec![(0.05 * a, a, Scale::Linear)],
+            GenericKind::DeadZone => vec![(1e-4 * a, 0.5 * a, Scale::Log)],
+            GenericKind::FirstOrderLag => vec![(0.1 * dt, 200.0 * dt, Scale::Log)],
         }
     }
 
-    /// Applies the effect with parameter `p` to a replayed output sampled every `dt`.
-    pub fn apply(self, p: f64, y: &[f64], dt: f64) -> Vec<f64> {
+    /// Applies the effect with parameters `params` (in [`GenericKind::param_names`] order;
+    /// missing ones are 0) to a replayed output sampled every `dt`.
+    pub fn apply(self, params: &[f64], y: &[f64], dt: f64) -> Vec<f64> {
+        let p = params.first().copied().unwrap_or(0.0);
         match self {
             GenericKind::SensorBias => y.iter().map(|v| v + p).collect(),
             GenericKind::SensorScale => y.iter().map(|v| v * (1.0 + p)).collect(),
             GenericKind::Quantisation => {
-                let q = p.max(1e-300);
-                y.iter().map(|v| q * (v / q).round()).collect()
+                let noise = params.get(1).copied().unwrap_or(0.0);
+                y.iter().map(|v| quantised_mean(*v, p, noise)).collect()
             }
             GenericKind::MeasurementDelay => {
                 let shift = (p / dt).max(0.0);
@@ -131,6 +137,43 @@ impl GenericKind {
             }
         }
     }
+}
+
+/// Expected reading of a quantiser of step `q` whose input is `v` plus Gaussian noise of
+/// std `s`: `sum_j q j P(round((v + e) / q) = j)`. With noise of a few steps the reading's
+/// mean is (nearly) `v` and the quantiser adds variance, not a staircase; with `s` -> 0 it
+/// is `q round(v / q)`.
+pub fn quantised_mean(v: f64, q: f64, s: f64) -> f64 {
+    let q = q.max(1e-300);
+    let r = s / q;
+    if r.is_nan() || r <= 1e-9 {
+        return q * (v / q).round();
+    }
+    if r >= 0.5 {
+        // Fourier series of the rounding error, each harmonic damped by the noise:
+        // q round(x) = q x - (q / pi) sum_k (-1)^(k+1) sin(2 pi k x) / k, x = v / q.
+        let x = v / q;
+        let mut acc = 0.0;
+        for k in 1..=3 {
+            let kf = k as f64;
+            let damp = (-2.0 * std::f64::consts::PI.powi(2) * kf * kf * r * r).exp();
+            let sign = if k % 2 == 1 { 1.0 } else { -1.0 };
+            acc += sign * damp * (std::f64::consts::TAU * kf * x).sin() / kf;
+        }
+        return v - q / std::f64::consts::PI * acc;
+    }
+    // Few lattice points carry the probability: sum them.
+    let centre = (v / q).round();
+    let reach = (6.0 * r).ceil() + 1.0;
+    let cdf = |x: f64| 0.5 * libm::erfc(-x / std::f64::consts::SQRT_2);
+    let mut acc = 0.0;
+    let mut j = centre - reach;
+    while j <= centre + reach {
+        let p = cdf((q * (j + 0.5) - v) / s) - cdf((q * (j - 0.5) - v) / s);
+        acc += q * j * p;
+        j += 1.0;
+    }
+    acc
 }
 
 /// One part of a candidate.
@@ -261,9 +304,18 @@ impl<'a> Problem<'a> {
         let mut out: Vec<Component> = (0..self.plant_effects.len())
             .map(Component::Plant)
             .collect();
-        for ch in 0..self.outputs.len() {
+        for (ch, channel) in self.outputs.iter().enumerate() {
             for kind in GenericKind::ALL {
-                out.push(Component::Generic(kind, ch));
+                // A plant effect that is the same prediction under the plant's own name
+                // stands in for it (two names for one fit would split the ranking).
+                let replaced = self.plant_effects.iter().any(|e| {
+                    e.replaces_generic
+                        .iter()
+                        .any(|(k, c)| *k == kind.name() && c == channel)
+                });
+                if !replaced {
+                    out.push(Component::Generic(kind, ch));
+                }
             }
         }
         out
@@ -293,17 +345,22 @@ impl<'a> Problem<'a> {
                         (a.min(v), b.max(v))
                     });
                     let span = (hi - lo).max(0.0);
-                    let (lo, hi, scale) = match (kind, lattice_step(&self.measured[*ch])) {
-                        (GenericKind::Quantisation, Some(q)) => (0.98 * q, 1.02 * q, Scale::Linear),
-                        _ => kind.range(amplitude, span, self.sigma[*ch], self.data.dt),
-                    };
-                    dims.push(Dim {
-                        component: ci,
-                        name: kind.param_name().to_string(),
-                        lo,
-                        hi,
-                        scale,
-                    });
+                    let sigma = self.sigma[*ch];
+                    let mut ranges = kind.ranges(amplitude, span, sigma, self.data.dt);
+                    if let (GenericKind::Quantisation, Some(q)) =
+                        (kind, lattice_step(&self.measured[*ch]))
+                    {
+                        ranges[0] = (0.98 * q, 1.02 * q, Scale::Linear);
+                    }
+                    for (name, (lo, hi, scale)) in kind.param_names().iter().zip(ranges) {
+                        dims.push(Dim {
+                            component: ci,
+                            name: name.to_string(),
+                            lo,
+                            hi,
+                            scale,
+                        });
+                    }
                 }
             }
         }
@@ -314,9 +371,9 @@ impl<'a> Problem<'a> {
     fn apply_generic(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
         let mut out = sim.clone();
         for (c, values) in fitted {
-            if let (Component::Generic(kind, ch), Some(&p)) = (c, values.first()) {
+            if let Component::Generic(kind, ch) = c {
                 let y = &mut out.outputs[*ch];
-                *y = kind.apply(p, y, self.data.dt);
+                *y = kind.apply(values, y, self.data.dt);
             }
         }
         out
@@ -447,6 +504,22 @@ impl<'a> Problem<'a> {
             .map(|((rss, n), s)| (rss / (*n).max(1) as f64 / (s * s) - 1.0).max(0.0))
             .sum::<f64>()
             .sqrt()
+    }
+
+    /// The smallest held-out gap that noise cannot produce: three standard deviations of
+    /// `sum_c (MSE_c / sigma_c^2 - 1)` when the model is right (each term has variance
+    /// `2 / n_c + 2 / dof_c`, the held-out count and the noise estimate's degrees of
+    /// freedom), as a gap (square root). Below it, a candidate's shrink is meaningless and
+    /// only its likelihood tells whether it explains something (an effect on the noise's
+    /// distribution, such as a coarse quantiser, rather than on the mean).
+    pub fn gap_resolution(&self) -> f64 {
+        let var: f64 = self
+            .channel_rss(&self.nominal, &self.test)
+            .iter()
+            .zip(&self.sigma_dof)
+            .map(|((_, n), dof)| 2.0 / (*n).max(1) as f64 + 2.0 / dof)
+            .sum();
+        (3.0 * var.sqrt()).sqrt()
     }
 
     /// Held-out Gaussian log-likelihood with per-channel variance from the training
@@ -707,23 +780,48 @@ mod tests {
     #[test]
     fn generic_effects_do_what_they_say() {
         let y = [0.0, 1.0, 2.0, 3.0, -3.0];
-        assert_eq!(GenericKind::SensorBias.apply(0.5, &y, 1.0)[1], 1.5);
-        assert_eq!(GenericKind::SensorScale.apply(0.1, &y, 1.0)[3], 3.0 * 1.1);
+        assert_eq!(GenericKind::SensorBias.apply(&[0.5], &y, 1.0)[1], 1.5);
         assert_eq!(
-            GenericKind::Quantisation.apply(2.0, &y, 1.0),
+            GenericKind::SensorScale.apply(&[0.1], &y, 1.0)[3],
+            3.0 * 1.1
+        );
+        assert_eq!(
+            GenericKind::Quantisation.apply(&[2.0, 0.0], &y, 1.0),
             vec![0.0, 2.0, 2.0, 4.0, -4.0]
         );
-        assert_eq!(GenericKind::MeasurementDelay.apply(1.5, &y, 1.0)[3], 1.5);
-        assert_eq!(GenericKind::OutputSaturation.apply(2.5, &y, 1.0)[3], 2.5);
-        assert_eq!(GenericKind::OutputSaturation.apply(2.5, &y, 1.0)[4], -2.5);
+        assert_eq!(GenericKind::MeasurementDelay.apply(&[1.5], &y, 1.0)[3], 1.5);
+        assert_eq!(GenericKind::OutputSaturation.apply(&[2.5], &y, 1.0)[3], 2.5);
         assert_eq!(
-            GenericKind::DeadZone.apply(1.5, &y, 1.0),
+            GenericKind::OutputSaturation.apply(&[2.5], &y, 1.0)[4],
+            -2.5
+        );
+        assert_eq!(
+            GenericKind::DeadZone.apply(&[1.5], &y, 1.0),
             vec![0.0, 0.0, 0.5, 1.5, -1.5]
         );
-        let lag = GenericKind::FirstOrderLag.apply(1.0, &[0.0, 1.0, 1.0], 1.0);
+        let lag = GenericKind::FirstOrderLag.apply(&[1.0], &[0.0, 1.0, 1.0], 1.0);
         assert!((lag[1] - (1.0 - (-1.0f64).exp())).abs() < 1e-12);
         for k in GenericKind::ALL {
             assert_eq!(GenericKind::from_name(k.name()), Some(k));
+            assert_eq!(k.param_names().len(), k.ranges(1.0, 1.0, 0.1, 0.1).len());
         }
+    }
+
+    #[test]
+    fn quantised_mean_is_the_staircase_without_noise_and_smooth_with_it() {
+        assert_eq!(quantised_mean(0.7, 1.0, 0.0), 1.0);
+        // Noise of two steps dithers the quantiser: the mean reading is the input.
+        assert!((quantised_mean(0.3, 1.0, 2.0) - 0.3).abs() < 1e-3);
+        // A fifth of a step of noise: between the staircase (0) and the input (0.3).
+        let m = quantised_mean(0.3, 1.0, 0.2);
+        assert!(m > 0.05 && m < 0.25, "{m}");
+        // Symmetric about a lattice point.
+        assert!((quantised_mean(-0.3, 1.0, 0.2) + m).abs() < 1e-12);
+        // The series and the direct sum agree where they meet.
+        let (a, b) = (
+            quantised_mean(0.3, 1.0, 0.4999),
+            quantised_mean(0.3, 1.0, 0.5),
+        );
+        assert!((a - b).abs() < 1e-4, "{a} vs {b}");
     }
 }

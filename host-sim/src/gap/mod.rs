@@ -12,8 +12,8 @@
 //! 3. *how far* the gap shrinks on the held-out blocks once the effect is added.
 //!
 //! A plant is anything that implements [`plant::GapPlant`]; the built-in ones are the
-//! reaction wheel ([`wheel`]) and the worked user example, a DC motor with load
-//! ([`dc_motor`]). `gap-bench` ([`bench`]) proves the diagnoser on generated data whose
+//! reaction wheel ([`wheel`]), the valve ([`valve`]), the scooter ([`scooter`]) and the
+//! worked user example, a DC motor with load ([`dc_motor`]). `gap-bench` ([`bench`]) proves the diagnoser on generated data whose
 //! effect it is not told about.
 
 pub mod analysis;
@@ -24,6 +24,7 @@ pub mod effects;
 pub mod meta;
 pub mod plant;
 pub mod report;
+pub mod scooter;
 pub mod stats;
 pub mod valve;
 pub mod wheel;

@@ -57,6 +57,35 @@ pub struct EffectSpec {
     pub fit: Vec<FitRange>,
     /// Input channels the effect needs (it is not a candidate when one is absent).
     pub needs_inputs: Vec<&'static str>,
+    /// Generic effects `(kind name, channel)` this effect is the plant's own name for
+    /// (the same prediction, e.g. an encoder efficiency is a sensor scale): they are not
+    /// candidates beside it.
+    pub replaces_generic: Vec<(&'static str, &'static str)>,
+}
+
+impl EffectSpec {
+    /// An effect with one fitted parameter and no required inputs.
+    pub fn single(
+        name: &'static str,
+        doc: &'static str,
+        param: &'static str,
+        lo: f64,
+        hi: f64,
+        scale: Scale,
+    ) -> Self {
+        Self {
+            name,
+            doc,
+            fit: vec![FitRange {
+                name: param,
+                lo,
+                hi,
+                scale,
+            }],
+            needs_inputs: Vec::new(),
+            replaces_generic: Vec::new(),
+        }
+    }
 }
 
 /// Recorded data as the plant sees it: time, inputs by name, measurements by name (NaN =
@@ -163,6 +192,81 @@ pub struct Regime {
     pub mask: Vec<bool>,
 }
 
+impl Regime {
+    /// The regime `label` of the samples `0..n` where `inside` holds.
+    pub fn from_fn(label: &str, n: usize, inside: impl Fn(usize) -> bool) -> Self {
+        Self {
+            label: label.to_string(),
+            mask: (0..n).map(inside).collect(),
+        }
+    }
+}
+
+/// Central-difference derivative of `x` sampled at `t` (one-sided at the ends).
+pub fn derivative(t: &[f64], x: &[f64]) -> Vec<f64> {
+    let n = x.len().min(t.len());
+    (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+            if b > a {
+                (x[b] - x[a]) / (t[b] - t[a])
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Speed thresholds of [`motion_regimes`] (same unit as the speed, and per second).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionThresholds {
+    /// `zero_crossing` below this |speed|.
+    pub zero: f64,
+    /// `low_speed` below this |speed|.
+    pub low: f64,
+    /// `high_speed` above this |speed|.
+    pub high: f64,
+    /// `accelerating` above this |acceleration|, `steady` at or below it.
+    pub acceleration: f64,
+}
+
+impl MotionThresholds {
+    /// Thresholds relative to the largest |speed| and |acceleration| of a replay: 5 %, 20 %
+    /// and 70 % of the top speed, 10 % of the top acceleration.
+    pub fn relative(speed: &[f64], acceleration: &[f64]) -> Self {
+        let top = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-9);
+        let (w, a) = (top(speed), top(acceleration));
+        Self {
+            zero: 0.05 * w,
+            low: 0.2 * w,
+            high: 0.7 * w,
+            acceleration: 0.1 * a,
+        }
+    }
+}
+
+/// The regimes of a rotating or moving plant: `zero_crossing`, `low_speed`, `high_speed`,
+/// `reverse`, `accelerating`, `steady` (the acceleration from `accel_speed`, typically the
+/// replay, which is noise-free).
+pub fn motion_regimes(
+    t: &[f64],
+    speed: &[f64],
+    accel_speed: &[f64],
+    limits: Option<MotionThresholds>,
+) -> Vec<Regime> {
+    let n = speed.len();
+    let accel = derivative(t, accel_speed);
+    let th = limits.unwrap_or_else(|| MotionThresholds::relative(accel_speed, &accel));
+    vec![
+        Regime::from_fn("zero_crossing", n, |k| speed[k].abs() < th.zero),
+        Regime::from_fn("low_speed", n, |k| speed[k].abs() < th.low),
+        Regime::from_fn("high_speed", n, |k| speed[k].abs() > th.high),
+        Regime::from_fn("reverse", n, |k| speed[k] < 0.0),
+        Regime::from_fn("accelerating", n, |k| accel[k].abs() > th.acceleration),
+        Regime::from_fn("steady", n, |k| accel[k].abs() <= th.acceleration),
+    ]
+}
+
 /// A system the gap diagnoser can replay.
 pub trait GapPlant: Sync {
     /// Name as written in the meta file's `plant`.
@@ -208,9 +312,10 @@ pub fn builtin_plant(name: &str) -> Option<Box<dyn GapPlant>> {
         "reaction_wheel" => Some(Box::new(crate::gap::wheel::WheelGapPlant)),
         "dc_motor" => Some(Box::new(crate::gap::dc_motor::DcMotorPlant)),
         "valve" => Some(Box::new(crate::gap::valve::ValveGapPlant)),
+        "scooter" => Some(Box::new(crate::gap::scooter::ScooterGapPlant)),
         _ => None,
     }
 }
 
 /// Names of the built-in plants (for error messages).
-pub const BUILTIN_PLANTS: &[&str] = &["reaction_wheel", "valve", "dc_motor"];
+pub const BUILTIN_PLANTS: &[&str] = &["reaction_wheel", "valve", "scooter", "dc_motor"];

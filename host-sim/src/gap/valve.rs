@@ -13,7 +13,7 @@
 //! without choking to start from does not exist in this project.
 
 use crate::gap::plant::{
-    EffectSpec, FitRange, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
+    EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
 };
 use nalgebra::SVector;
 use prognos_core::plants::valve::{Contact, Integrator, NU, NX, ValveParams, idx};
@@ -69,17 +69,7 @@ pub const VALVE_PARAMETERS: &[ParamSpec] = &[
 
 /// The valve's own catalogue.
 pub fn valve_effects() -> Vec<EffectSpec> {
-    let one = |name: &'static str, doc: &'static str, p: &'static str, lo, hi| EffectSpec {
-        name,
-        doc,
-        fit: vec![FitRange {
-            name: p,
-            lo,
-            hi,
-            scale: Scale::Log,
-        }],
-        needs_inputs: Vec::new(),
-    };
+    let one = |name, doc, p, lo, hi| EffectSpec::single(name, doc, p, lo, hi, Scale::Log);
     vec![
         one(
             "friction_increase",
@@ -126,6 +116,117 @@ pub fn valve_effects() -> Vec<EffectSpec> {
     ]
 }
 
+/// What the bench's truth adds to a replay (all off by default): finer steps and two
+/// departures outside the catalogue.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TruthExtras {
+    /// Divides the largest internal step.
+    pub substep_factor: u32,
+    /// From this time on (s) ...
+    pub supply_drop_from: f64,
+    /// ... the supply pressure is this fraction lower.
+    pub supply_drop: f64,
+    /// The true inlet pressure exceeds the recorded `u:pl` by this (Pa).
+    pub inlet_offset: f64,
+}
+
+impl Default for TruthExtras {
+    fn default() -> Self {
+        Self {
+            substep_factor: 1,
+            supply_drop_from: f64::INFINITY,
+            supply_drop: 0.0,
+            inlet_offset: 0.0,
+        }
+    }
+}
+
+impl TruthExtras {
+    fn supply_factor(&self, t: f64) -> f64 {
+        if t >= self.supply_drop_from {
+            1.0 - self.supply_drop
+        } else {
+            1.0
+        }
+    }
+}
+
+/// One replay of the valve with `active` effects, plus the bench's `extras`.
+pub fn simulate_valve(
+    params: &Params,
+    active: &[&str],
+    data: &PlantData,
+    extras: &TruthExtras,
+) -> Result<Simulation, String> {
+    let g = |n: &str| param(params, n);
+    let mut vp = ValveParams::<f64>::progpy();
+    vp.max_substep /= f64::from(extras.substep_factor.max(1));
+    vp.p_supply = g("supply_pressure");
+    vp.integrator = if g("progpy_euler") >= 0.5 {
+        Integrator::ProgpyEuler
+    } else {
+        Integrator::SemiImplicit
+    };
+    if active.contains(&"seal_contact") {
+        vp.contact = Contact::Seal {
+            k_c: g("seal_stiffness"),
+        };
+    }
+    let input = |name: &str| data.input(name).ok_or(format!("missing u:{name}"));
+    let (pl, pr, top, bottom) = (
+        input("pl")?,
+        input("pr")?,
+        input("top_port_supply")?,
+        input("bottom_port_supply")?,
+    );
+    let u_at = |k: usize| -> SVector<f64, NU> {
+        let supply = vp.p_supply * extras.supply_factor(data.t[k]);
+        let port = |on: f64| if on >= 0.5 { supply } else { vp.p_atm };
+        SVector::from([
+            pl[k] + extras.inlet_offset,
+            pr[k],
+            port(top[k]),
+            port(bottom[k]),
+        ])
+    };
+    let x0 = data.first_output("x").unwrap_or(0.0).clamp(0.0, vp.l_s);
+    let pt0 = data.first_output("pt").unwrap_or(vp.p_supply);
+    let pb0 = data.first_output("pb").unwrap_or(vp.p_atm);
+    let mut s = SVector::<f64, NX>::zeros();
+    s[idx::X] = x0;
+    s[idx::M_TOP] = vp.mass_top_for(x0, pt0);
+    s[idx::M_BOT] = vp.mass_bottom_for(x0, pb0);
+    s[idx::R] = g("friction");
+    s[idx::K] = g("spring");
+    s[idx::A_I] = g("internal_leak_area");
+    s[idx::A_ET] = g("top_leak_area");
+    s[idx::A_EB] = g("bottom_leak_area");
+    let n = data.len();
+    let mut out: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(n)).collect();
+    let mut velocity = Vec::with_capacity(n);
+    for k in 0..n {
+        let o = vp.outputs(&s, &u_at(k));
+        for (c, v) in out.iter_mut().zip(o) {
+            c.push(v);
+        }
+        velocity.push(s[idx::V]);
+        if k + 1 == n {
+            break;
+        }
+        s = vp.advance(&s, &u_at(k + 1), data.t[k + 1] - data.t[k]);
+        if !s.iter().all(|v| v.is_finite()) {
+            return Err(format!("replay diverged at t = {}", data.t[k]));
+        }
+    }
+    let mut states = BTreeMap::new();
+    states.insert("x".to_string(), out[0].clone());
+    states.insert("v".to_string(), velocity);
+    Ok(Simulation {
+        outputs: out,
+        states,
+    })
+}
+
 impl GapPlant for ValveGapPlant {
     fn name(&self) -> &'static str {
         "valve"
@@ -153,66 +254,7 @@ impl GapPlant for ValveGapPlant {
         active: &[&str],
         data: &PlantData,
     ) -> Result<Simulation, String> {
-        let g = |n: &str| param(params, n);
-        let mut vp = ValveParams::<f64>::progpy();
-        vp.p_supply = g("supply_pressure");
-        vp.integrator = if g("progpy_euler") >= 0.5 {
-            Integrator::ProgpyEuler
-        } else {
-            Integrator::SemiImplicit
-        };
-        if active.contains(&"seal_contact") {
-            vp.contact = Contact::Seal {
-                k_c: g("seal_stiffness"),
-            };
-        }
-        let input = |name: &str| data.input(name).ok_or(format!("missing u:{name}"));
-        let (pl, pr, top, bottom) = (
-            input("pl")?,
-            input("pr")?,
-            input("top_port_supply")?,
-            input("bottom_port_supply")?,
-        );
-        let u_at = |k: usize| -> SVector<f64, NU> {
-            let port = |on: f64| if on >= 0.5 { vp.p_supply } else { vp.p_atm };
-            SVector::from([pl[k], pr[k], port(top[k]), port(bottom[k])])
-        };
-        let x0 = data.first_output("x").unwrap_or(0.0).clamp(0.0, vp.l_s);
-        let pt0 = data.first_output("pt").unwrap_or(vp.p_supply);
-        let pb0 = data.first_output("pb").unwrap_or(vp.p_atm);
-        let mut s = SVector::<f64, NX>::zeros();
-        s[idx::X] = x0;
-        s[idx::M_TOP] = vp.mass_top_for(x0, pt0);
-        s[idx::M_BOT] = vp.mass_bottom_for(x0, pb0);
-        s[idx::R] = g("friction");
-        s[idx::K] = g("spring");
-        s[idx::A_I] = g("internal_leak_area");
-        s[idx::A_ET] = g("top_leak_area");
-        s[idx::A_EB] = g("bottom_leak_area");
-        let n = data.len();
-        let mut out: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(n)).collect();
-        let mut velocity = Vec::with_capacity(n);
-        for k in 0..n {
-            let o = vp.outputs(&s, &u_at(k));
-            for (c, v) in out.iter_mut().zip(o) {
-                c.push(v);
-            }
-            velocity.push(s[idx::V]);
-            if k + 1 == n {
-                break;
-            }
-            s = vp.advance(&s, &u_at(k + 1), data.t[k + 1] - data.t[k]);
-            if !s.iter().all(|v| v.is_finite()) {
-                return Err(format!("replay diverged at t = {}", data.t[k]));
-            }
-        }
-        let mut states = BTreeMap::new();
-        states.insert("x".to_string(), out[0].clone());
-        states.insert("v".to_string(), velocity);
-        Ok(Simulation {
-            outputs: out,
-            states,
-        })
+        simulate_valve(params, active, data, &TruthExtras::default())
     }
 
     fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {
@@ -227,36 +269,14 @@ impl GapPlant for ValveGapPlant {
             .get("v")
             .cloned()
             .unwrap_or_else(|| vec![0.0; n]);
-        let mask = |f: &dyn Fn(usize) -> bool| (0..n).map(f).collect::<Vec<bool>>();
         vec![
-            Regime {
-                label: "opening".into(),
-                mask: mask(&|k| open_cmd[k] && x[k] < l_s - 1e-3),
-            },
-            Regime {
-                label: "closing".into(),
-                mask: mask(&|k| !open_cmd[k] && x[k] > 1e-3),
-            },
-            Regime {
-                label: "open".into(),
-                mask: mask(&|k| x[k] >= l_s - 1e-3),
-            },
-            Regime {
-                label: "closed".into(),
-                mask: mask(&|k| x[k] <= 1e-3),
-            },
-            Regime {
-                label: "moving".into(),
-                mask: mask(&|k| v[k].abs() > 1e-4),
-            },
-            Regime {
-                label: "open_command".into(),
-                mask: mask(&|k| open_cmd[k]),
-            },
-            Regime {
-                label: "close_command".into(),
-                mask: mask(&|k| !open_cmd[k]),
-            },
+            Regime::from_fn("opening", n, |k| open_cmd[k] && x[k] < l_s - 1e-3),
+            Regime::from_fn("closing", n, |k| !open_cmd[k] && x[k] > 1e-3),
+            Regime::from_fn("open", n, |k| x[k] >= l_s - 1e-3),
+            Regime::from_fn("closed", n, |k| x[k] <= 1e-3),
+            Regime::from_fn("moving", n, |k| v[k].abs() > 1e-4),
+            Regime::from_fn("open_command", n, |k| open_cmd[k]),
+            Regime::from_fn("close_command", n, |k| !open_cmd[k]),
         ]
     }
 }

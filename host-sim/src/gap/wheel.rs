@@ -18,7 +18,8 @@
 //! (`c_v(T) = c_v(T_ref) - viscous_slope (T - T_ref)`, the paper's `c0 - c1 (T + 30)`).
 
 use crate::gap::plant::{
-    EffectSpec, FitRange, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
+    EffectSpec, FitRange, GapPlant, MotionThresholds, ParamSpec, Params, PlantData, Regime, Scale,
+    Simulation, motion_regimes, param,
 };
 use prognos_core::plants::reaction_wheel::WheelParams;
 use std::collections::BTreeMap;
@@ -148,17 +149,7 @@ pub const WHEEL_PARAMETERS: &[ParamSpec] = &[
 
 /// The wheel's own catalogue.
 pub fn wheel_effects() -> Vec<EffectSpec> {
-    let one = |name: &'static str, doc: &'static str, p: &'static str, lo, hi, scale| EffectSpec {
-        name,
-        doc,
-        fit: vec![FitRange {
-            name: p,
-            lo,
-            hi,
-            scale,
-        }],
-        needs_inputs: Vec::new(),
-    };
+    let one = EffectSpec::single;
     let mut viscous = one(
         "viscous_temperature",
         "viscous coefficient falls with lubricant temperature",
@@ -235,6 +226,7 @@ pub fn wheel_effects() -> Vec<EffectSpec> {
                 },
             ],
             needs_inputs: Vec::new(),
+            replaces_generic: Vec::new(),
         },
         viscous,
     ]
@@ -500,16 +492,6 @@ impl GapPlant for WheelGapPlant {
             .output("speed")
             .map_or_else(|| nominal.outputs[1].clone(), <[f64]>::to_vec);
         let sim_speed = &nominal.outputs[1];
-        let accel: Vec<f64> = (0..n)
-            .map(|k| {
-                let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
-                if b > a {
-                    (sim_speed[b] - sim_speed[a]) / (data.t[b] - data.t[a])
-                } else {
-                    0.0
-                }
-            })
-            .collect();
         let command = data.input("command").unwrap_or(&[]);
         let mut since_step = vec![f64::INFINITY; n];
         let mut last = f64::NEG_INFINITY;
@@ -519,48 +501,21 @@ impl GapPlant for WheelGapPlant {
             }
             *since = data.t[k] - last;
         }
-        let mask = |f: &dyn Fn(usize) -> bool| (0..n).map(f).collect::<Vec<bool>>();
-        let mut out = vec![
-            Regime {
-                label: "zero_crossing".into(),
-                mask: mask(&|k| speed[k].abs() < 5.0),
-            },
-            Regime {
-                label: "low_speed".into(),
-                mask: mask(&|k| speed[k].abs() < 50.0),
-            },
-            Regime {
-                label: "high_speed".into(),
-                mask: mask(&|k| speed[k].abs() > 400.0),
-            },
-            Regime {
-                label: "reverse".into(),
-                mask: mask(&|k| speed[k] < 0.0),
-            },
-            Regime {
-                label: "accelerating".into(),
-                mask: mask(&|k| accel[k].abs() > 0.5),
-            },
-            Regime {
-                label: "steady".into(),
-                mask: mask(&|k| accel[k].abs() <= 0.5),
-            },
-            Regime {
-                label: "after_command_step".into(),
-                mask: mask(&|k| since_step[k] < 1.0),
-            },
-        ];
+        let limits = MotionThresholds {
+            zero: 5.0,
+            low: 50.0,
+            high: 400.0,
+            acceleration: 0.5,
+        };
+        let mut out = motion_regimes(&data.t, &speed, sim_speed, Some(limits));
+        out.push(Regime::from_fn("after_command_step", n, |k| {
+            since_step[k] < 1.0
+        }));
         if let Some(temp) = data.input("temperature")
             && let Some(mid) = crate::gap::stats::median(temp)
         {
-            out.push(Regime {
-                label: "warm".into(),
-                mask: mask(&|k| temp[k] > mid),
-            });
-            out.push(Regime {
-                label: "cool".into(),
-                mask: mask(&|k| temp[k] <= mid),
-            });
+            out.push(Regime::from_fn("warm", n, |k| temp[k] > mid));
+            out.push(Regime::from_fn("cool", n, |k| temp[k] <= mid));
         }
         out
     }

@@ -1,0 +1,410 @@
+//! The electric scooter as a gap plant (Yu et al. 2020, section 2; the core's
+//! `plants::scooter` equations with Table 3's nominal values).
+//!
+//! Input `u:voltage` (V, the motor-driver input; a row's input is the one held during the
+//! step that ends at that row, as the project's scooter traces record it). Outputs
+//! `y:rear_speed` (rad/s, rear encoder: `beta_theta_r omega_r`), `y:body_speed` (m/s, body
+//! speed sensor: `beta_v v_m`), `y:front_speed` (rad/s, front encoder). States compared with
+//! truth columns: `omega_r`, `v_m`, `omega_f`.
+//!
+//! Every fault is a model parameter, so the catalogue's effects are departures of those
+//! from the user's values: `rear_coulomb_friction` (`rear_coulomb`, the wheel's own part
+//! of the rear dry friction), `front_coulomb_friction` (`front_coulomb`),
+//! `shaft_compliance` (`rear_shaft_stiffness` K1), `encoder_efficiency` (`beta_theta_r`),
+//! `speed_sensor_efficiency` (`beta_v`) and `motor_resistance_drift` (`resistance_drift`
+//! `d`: the driver's voltage-to-current constant becomes `N1 / (1 + d)`, as a winding whose
+//! resistance grew by the factor `1 + d` draws that much less current). The two
+//! efficiencies *are* sensor scales of their channels, so they replace the generic
+//! `sensor_scale` there.
+
+use crate::gap::plant::{
+    EffectSpec, GapPlant, MotionThresholds, ParamSpec, Params, PlantData, Regime, Scale,
+    Simulation, motion_regimes, param,
+};
+use nalgebra::Vector6;
+use prognos_core::model::rk4;
+use prognos_core::plants::scooter::{OMEGA_F, OMEGA_R, S_M, ScooterParams, THETA_F, THETA_R, V_M};
+use std::collections::BTreeMap;
+
+/// The scooter gap plant.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ScooterGapPlant;
+
+/// Parameters with defaults (Table 3 nominal values, ideal sensors).
+pub const SCOOTER_PARAMETERS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "drive_gain",
+        default: 3.0,
+        doc: "voltage-to-current constant N1 (A/V)",
+    },
+    ParamSpec {
+        name: "torque_ratio",
+        default: 0.0666,
+        doc: "current-to-torque ratio N2 (N m/A)",
+    },
+    ParamSpec {
+        name: "reduction",
+        default: 1.0 / 18.0,
+        doc: "reduction ratio N3",
+    },
+    ParamSpec {
+        name: "wheel_radius",
+        default: 0.115,
+        doc: "N4 (m)",
+    },
+    ParamSpec {
+        name: "motor_viscous",
+        default: 1.725e-3,
+        doc: "motor viscous friction (N m s/rad)",
+    },
+    ParamSpec {
+        name: "motor_coulomb",
+        default: 5.635e-2,
+        doc: "motor Coulomb friction (N m)",
+    },
+    ParamSpec {
+        name: "motor_inertia",
+        default: 5.03e-4,
+        doc: "J_m (kg m^2)",
+    },
+    ParamSpec {
+        name: "mass",
+        default: 20.7,
+        doc: "body mass m (kg)",
+    },
+    ParamSpec {
+        name: "rear_inertia",
+        default: 4.87e-3,
+        doc: "J_r (kg m^2)",
+    },
+    ParamSpec {
+        name: "front_inertia",
+        default: 6.97e-3,
+        doc: "J_f (kg m^2)",
+    },
+    ParamSpec {
+        name: "rear_viscous",
+        default: 3.545e-2,
+        doc: "R_rv (N m s/rad)",
+    },
+    ParamSpec {
+        name: "rear_coulomb",
+        default: 5.955e-2,
+        doc: "R_rc (N m), rear_coulomb_friction",
+    },
+    ParamSpec {
+        name: "front_viscous",
+        default: 1.02e-3,
+        doc: "R_fv (N m s/rad)",
+    },
+    ParamSpec {
+        name: "front_coulomb",
+        default: 1.857e-3,
+        doc: "R_fc (N m), front_coulomb_friction",
+    },
+    ParamSpec {
+        name: "rear_shaft_stiffness",
+        default: 10.02,
+        doc: "K1 (N m/rad), shaft_compliance",
+    },
+    ParamSpec {
+        name: "front_shaft_stiffness",
+        default: 10.07,
+        doc: "K2 (N m/rad)",
+    },
+    ParamSpec {
+        name: "sign_smoothing",
+        default: 0.05,
+        doc: "speed scale of the smooth sign of the Coulomb terms (rad/s)",
+    },
+    ParamSpec {
+        name: "beta_theta_r",
+        default: 1.0,
+        doc: "rear encoder efficiency, encoder_efficiency",
+    },
+    ParamSpec {
+        name: "beta_v",
+        default: 1.0,
+        doc: "body speed sensor efficiency, speed_sensor_efficiency",
+    },
+    ParamSpec {
+        name: "resistance_drift",
+        default: 0.0,
+        doc: "relative motor resistance increase d, motor_resistance_drift",
+    },
+    ParamSpec {
+        name: "substeps",
+        default: 2.0,
+        doc: "RK4 sub-steps per sample (the front-wheel mode is near 6 Hz)",
+    },
+];
+
+/// The scooter's own catalogue.
+pub fn scooter_effects() -> Vec<EffectSpec> {
+    let mut encoder = EffectSpec::single(
+        "encoder_efficiency",
+        "rear encoder reads beta_theta_r times the rear-wheel speed",
+        "beta_theta_r",
+        0.2,
+        1.5,
+        Scale::Linear,
+    );
+    encoder.replaces_generic = vec![("sensor_scale", "rear_speed")];
+    let mut body = EffectSpec::single(
+        "speed_sensor_efficiency",
+        "body speed sensor reads beta_v times the body speed",
+        "beta_v",
+        0.2,
+        1.5,
+        Scale::Linear,
+    );
+    body.replaces_generic = vec![("sensor_scale", "body_speed")];
+    vec![
+        EffectSpec::single(
+            "rear_coulomb_friction",
+            "rear-wheel dry friction R_rc departs from the model's",
+            "rear_coulomb",
+            1e-4,
+            10.0,
+            Scale::Log,
+        ),
+        EffectSpec::single(
+            "front_coulomb_friction",
+            "front-wheel dry friction R_fc departs from the model's",
+            "front_coulomb",
+            1e-5,
+            1.0,
+            Scale::Log,
+        ),
+        EffectSpec::single(
+            "shaft_compliance",
+            "rear transmission shaft stiffness K1 departs from the model's",
+            "rear_shaft_stiffness",
+            0.05,
+            1000.0,
+            Scale::Log,
+        ),
+        encoder,
+        body,
+        EffectSpec::single(
+            "motor_resistance_drift",
+            "motor resistance grows by 1 + d: drive current N1 u / (1 + d)",
+            "resistance_drift",
+            -0.5,
+            3.0,
+            Scale::Linear,
+        ),
+    ]
+}
+
+/// The core's parameters from the gap plant's.
+pub fn scooter_params(params: &Params) -> ScooterParams<f64> {
+    let g = |n: &str| param(params, n);
+    ScooterParams {
+        n1: g("drive_gain") / (1.0 + g("resistance_drift")).max(1e-6),
+        n2: g("torque_ratio"),
+        n3: g("reduction"),
+        n4: g("wheel_radius"),
+        r_mv: g("motor_viscous"),
+        r_mc: g("motor_coulomb"),
+        j_m: g("motor_inertia"),
+        m: g("mass"),
+        j_r: g("rear_inertia"),
+        j_f: g("front_inertia"),
+        r_rv: g("rear_viscous"),
+        r_rc: g("rear_coulomb"),
+        r_fv: g("front_viscous"),
+        r_fc: g("front_coulomb"),
+        k1: g("rear_shaft_stiffness"),
+        k2: g("front_shaft_stiffness"),
+        sign_scale: g("sign_smoothing"),
+    }
+}
+
+/// One replay. `substep_factor` multiplies the model's sub-steps (the bench's truth runs
+/// finer); `body_force(t)` is a force (N) on the body the caller adds (the bench's
+/// out-of-catalogue effects; zero for the diagnosis).
+pub fn simulate_scooter(
+    params: &Params,
+    data: &PlantData,
+    substep_factor: u32,
+    body_force: &dyn Fn(f64) -> f64,
+) -> Result<Simulation, String> {
+    let p = scooter_params(params);
+    let positive = [p.n3, p.n4, p.m, p.j_f, p.k1, p.k2, p.rear_inertia()];
+    if !positive.iter().all(|v| *v > 0.0) {
+        return Err(
+            "reduction, wheel radius, mass, inertias and stiffnesses must be positive".into(),
+        );
+    }
+    let (beta_r, beta_v) = (param(params, "beta_theta_r"), param(params, "beta_v"));
+    if beta_r.abs() < 1e-9 || beta_v.abs() < 1e-9 {
+        return Err("sensor efficiencies must be nonzero".into());
+    }
+    let substeps = (param(params, "substeps").max(1.0) as u32) * substep_factor.max(1);
+    let voltage = data.input("voltage").ok_or("missing u:voltage")?;
+    let n = data.len();
+    let mut x = Vector6::<f64>::zeros();
+    x[OMEGA_R] = data.first_output("rear_speed").map_or(0.0, |v| v / beta_r);
+    x[V_M] = data.first_output("body_speed").map_or(0.0, |v| v / beta_v);
+    x[OMEGA_F] = data.first_output("front_speed").unwrap_or(x[V_M] / p.n4);
+    // Shafts start twisted by the torques that carry the front wheel's steady friction.
+    let front_torque = p.r_fc * p.sign(x[OMEGA_F]) + p.r_fv * x[OMEGA_F];
+    x[THETA_F] = -front_torque / p.k2;
+    x[S_M] = 0.0;
+    x[THETA_R] = front_torque / p.k1;
+    let mut out: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(n)).collect();
+    let mut states: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(n)).collect();
+    for k in 0..n {
+        out[0].push(beta_r * x[OMEGA_R]);
+        out[1].push(beta_v * x[V_M]);
+        out[2].push(x[OMEGA_F]);
+        states[0].push(x[OMEGA_R]);
+        states[1].push(x[V_M]);
+        states[2].push(x[OMEGA_F]);
+        if k + 1 == n {
+            break;
+        }
+        let dt = data.t[k + 1] - data.t[k];
+        let u = voltage[k + 1];
+        let force = body_force(data.t[k] + 0.5 * dt);
+        let rhs = |s: &Vector6<f64>| {
+            let mut d = p.derivative(s, u, p.r_rv, p.k1);
+            d[V_M] += force / p.m;
+            d
+        };
+        x = rk4(rhs, &x, dt, substeps);
+        if !x.iter().all(|v| v.is_finite()) {
+            return Err(format!("replay diverged at t = {}", data.t[k]));
+        }
+    }
+    let mut named = BTreeMap::new();
+    for (name, s) in ["omega_r", "v_m", "omega_f"].iter().zip(states) {
+        named.insert(name.to_string(), s);
+    }
+    Ok(Simulation {
+        outputs: out,
+        states: named,
+    })
+}
+
+impl GapPlant for ScooterGapPlant {
+    fn name(&self) -> &'static str {
+        "scooter"
+    }
+
+    fn parameters(&self) -> Vec<ParamSpec> {
+        SCOOTER_PARAMETERS.to_vec()
+    }
+
+    fn required_inputs(&self) -> Vec<&'static str> {
+        vec!["voltage"]
+    }
+
+    fn outputs(&self) -> Vec<&'static str> {
+        vec!["rear_speed", "body_speed", "front_speed"]
+    }
+
+    fn effects(&self) -> Vec<EffectSpec> {
+        scooter_effects()
+    }
+
+    fn simulate(
+        &self,
+        params: &Params,
+        _active: &[&str],
+        data: &PlantData,
+    ) -> Result<Simulation, String> {
+        simulate_scooter(params, data, 1, &|_| 0.0)
+    }
+
+    fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {
+        let n = data.len();
+        let body = &nominal.outputs[1];
+        let speed: Vec<f64> = data
+            .output("body_speed")
+            .map_or_else(|| body.clone(), <[f64]>::to_vec);
+        let accel = crate::gap::plant::derivative(&data.t, body);
+        let th = MotionThresholds::relative(body, &accel);
+        let mut out = motion_regimes(&data.t, &speed, body, Some(th));
+        let voltage = data.input("voltage").unwrap_or(&[]);
+        let drive = |k: usize| voltage.get(k).copied().unwrap_or(0.0);
+        out.push(Regime::from_fn("braking", n, |k| drive(k) * body[k] < 0.0));
+        out.push(Regime::from_fn("coasting", n, |k| drive(k) == 0.0));
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector1;
+    use prognos_core::model::Model;
+    use prognos_core::plants::scooter::{K1, R_RV, ScooterModel};
+
+    fn profile(n: usize, dt: f64) -> PlantData {
+        let mut d = PlantData {
+            dt,
+            ..Default::default()
+        };
+        d.t = (0..n).map(|k| k as f64 * dt).collect();
+        let u = (0..n).map(|k| if k < n / 2 { 1.5 } else { -0.5 }).collect();
+        d.inputs.insert("voltage".into(), u);
+        d
+    }
+
+    #[test]
+    fn nominal_replay_matches_the_core_model_from_rest() {
+        let (n, dt) = (1500, 0.02);
+        let data = profile(n, dt);
+        let model = ScooterModel::<f64>::nominal();
+        let mut x = model.nominal_state();
+        let mut rear = vec![x[OMEGA_R]];
+        for k in 1..n {
+            x = model.step(&x, &Vector1::new(data.inputs["voltage"][k]), dt);
+            rear.push(x[OMEGA_R]);
+        }
+        assert_eq!((x[R_RV], x[K1]), (model.params.r_rv, model.params.k1));
+        let plant = ScooterGapPlant;
+        let sim = plant.simulate(&plant.default_params(), &[], &data).unwrap();
+        let err = sim.outputs[0]
+            .iter()
+            .zip(&rear)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        let top = rear.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(top > 3.0, "{top}");
+        assert!(err < 1e-9 * top, "{err}");
+    }
+
+    #[test]
+    fn each_effect_changes_the_replay_and_efficiencies_scale_their_channel() {
+        let data = profile(1500, 0.02);
+        let plant = ScooterGapPlant;
+        let base = plant.default_params();
+        let nominal = plant.simulate(&base, &[], &data).unwrap();
+        for e in scooter_effects() {
+            let mut p = base.clone();
+            let r = &e.fit[0];
+            let v = if r.scale == Scale::Log {
+                (r.lo * r.hi).sqrt()
+            } else {
+                r.lo + 0.3 * (r.hi - r.lo)
+            };
+            p.insert(r.name.to_string(), v);
+            let sim = plant.simulate(&p, &[e.name], &data).unwrap();
+            let change: f64 = sim
+                .outputs
+                .iter()
+                .zip(&nominal.outputs)
+                .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>())
+                .sum();
+            assert!(change > 1e-3, "{} changes nothing", e.name);
+        }
+        let mut p = base.clone();
+        p.insert("beta_theta_r".into(), 0.8);
+        let sim = plant.simulate(&p, &[], &data).unwrap();
+        for (a, b) in sim.outputs[0].iter().zip(&nominal.outputs[0]).skip(1) {
+            assert!((a - 0.8 * b).abs() < 1e-9 * (1.0 + b.abs()));
+        }
+    }
+}
