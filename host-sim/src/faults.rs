@@ -329,6 +329,9 @@ mod tests {
         // Every dropout is a predict-only step, reported as not fused.
         assert!(faulty.rejected >= faulty.injected.dropouts, "{rows:?}");
         // The true RUL is about 1530 s: both within 2 % (30 s).
-        assert!(clean.rul_error < 30.0 && faulty.rul_error < 30.0, "{rows:?}");
+        assert!(
+            clean.rul_error < 30.0 && faulty.rul_error < 30.0,
+            "{rows:?}"
+        );
     }
 }
