@@ -7,6 +7,8 @@
 //! chambers is fast-forwarded (only the time-driven leak areas grow); prediction advances
 //! each particle a whole cycle at a time with tabulated cycle work (`DamageRateTable`).
 
+use crate::lockstep::InjectedFaults;
+use crate::scenario::SensorFaults;
 use nalgebra::SVector;
 use prognos_core::filter::particle::{ParticleFilter, PfConfig};
 use prognos_core::metrics;
@@ -176,6 +178,9 @@ pub struct Experiment {
     pub convergence_cycles: usize,
     /// Cycles ignored by PRMSE_w.
     pub prmse_skip_cycles: usize,
+    /// Faults injected into the selected measurements (off in the paper's tables); a sample
+    /// with a missing (NaN) channel is a predict-only step.
+    pub sensor_faults: SensorFaults,
     pub seed: u64,
 }
 
@@ -209,6 +214,10 @@ pub struct RunResult {
     pub damage_estimate_per_cycle: Vec<Vec<f64>>,
     /// Per estimated mode, the true damage at the end of each cycle.
     pub true_damage_per_cycle: Vec<Vec<f64>>,
+    /// Samples the filter did not fuse (missing or rejected).
+    pub rejected_samples: usize,
+    /// Faults injected by `Experiment::sensor_faults`.
+    pub injected: InjectedFaults,
     /// Wall-clock seconds of the run.
     pub seconds: f64,
 }
@@ -360,6 +369,8 @@ pub fn run_experiment_in<T: Real, const N: usize>(
 
     let max_cycles = 400usize;
     let mut true_eol = f64::NAN;
+    let mut injector = crate::lockstep::FaultInjector::new(exp.sensor_faults, exp.seed);
+    let mut rejected_samples = 0usize;
     'cycles: for cycle in 0..max_cycles {
         if setup.thresholds.exceeded(&truth.state) {
             true_eol = cycle as f64;
@@ -395,9 +406,22 @@ pub fn run_experiment_in<T: Real, const N: usize>(
             }
             truth.advance(&u, dt);
             let outputs = truth.measure(&u, &mut rng).map(to_t);
-            let (y, n) = model.select(&outputs);
+            let (mut y, n) = model.select(&outputs);
+            let mut sample: Vec<f64> = y[..n].iter().map(|v| v.as_f64()).collect();
+            injector.apply(
+                t_cycles * SAMPLES_PER_CYCLE as f64 * SAMPLE_DT,
+                SAMPLE_DT,
+                &mut sample,
+            );
+            for (v, f) in y.iter_mut().zip(&sample) {
+                *v = to_t(*f);
+            }
+            let measurement = sample.iter().all(|v| v.is_finite()).then_some(&y[..n]);
             // A step that the filter rejects leaves it unchanged; the run goes on.
-            let _ = pf.step(&model, &u_t, Some(&y[..n]), to_t(dt), &mut rng);
+            match pf.step(&model, &u_t, measurement, to_t(dt), &mut rng) {
+                Ok(report) if measurement.is_some() && report.fused => {}
+                _ => rejected_samples += 1,
+            }
             let t_now = t_cycles + 1.0 / SAMPLES_PER_CYCLE as f64;
             est_times.push(t_now);
             let weights = pf.log_weights().map(|lw| lw.as_f64().exp());
@@ -500,6 +524,8 @@ pub fn run_experiment_in<T: Real, const N: usize>(
             .collect(),
         damage_estimate_per_cycle: damage_estimates,
         true_damage_per_cycle: true_damage,
+        rejected_samples,
+        injected: injector.counts,
         seconds: started.elapsed().as_secs_f64(),
     }
 }
@@ -631,6 +657,7 @@ pub fn table2_experiment(
         asynchronous_commands: true,
         convergence_cycles: 3,
         prmse_skip_cycles: 10,
+        sensor_faults: SensorFaults::default(),
         seed,
     }
 }
@@ -755,6 +782,7 @@ pub fn table3_experiment(setup: &ValveSetup, seed: u64) -> Experiment {
         asynchronous_commands: true,
         convergence_cycles: 3,
         prmse_skip_cycles: 10,
+        sensor_faults: SensorFaults::default(),
         seed,
     }
 }

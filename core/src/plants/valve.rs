@@ -1025,6 +1025,25 @@ impl<T: Real> Stochastic<T, NX, NU> for Valve<T> {
         }
         if acc.finite() { acc } else { -T::MAX_FINITE }
     }
+
+    fn predicted_measurement(
+        &self,
+        x: &SVector<T, NX>,
+        u: &SVector<T, NU>,
+        predicted: &mut [T],
+        noise_variance: &mut [T],
+    ) -> bool {
+        let outputs = self.params.outputs(x, u);
+        let (selected, n) = self.select(&outputs);
+        let std = self.noise_std();
+        for (slot, &m) in predicted.iter_mut().zip(&selected).take(n) {
+            *slot = m;
+        }
+        for (slot, &s) in noise_variance.iter_mut().zip(&std).take(n) {
+            *slot = s * s;
+        }
+        true
+    }
 }
 
 /// Functional limits that define end of life.
@@ -1638,6 +1657,14 @@ mod tests {
             wrong[0] += 3.0 * model.noise_std()[0];
             let ll = model.log_likelihood(&s, &u, &wrong[..n]);
             assert!((ll + 4.5).abs() < 1e-9, "{set:?}: {ll}");
+            // The predicted measurement (the PF's innovation report) is what the likelihood
+            // scores against, with the same noise.
+            let (mut predicted, mut variance) = ([f64::NAN; 4], [f64::NAN; 4]);
+            assert!(model.predicted_measurement(&s, &u, &mut predicted, &mut variance));
+            for i in 0..n {
+                assert_eq!(predicted[i], y[i], "{set:?}");
+                assert_eq!(variance[i], model.noise_std()[i].powi(2), "{set:?}");
+            }
         }
         // The discrete set: a particle that says "open" while the sensor says "closed" loses
         // 2 * 0.5 / 0.1^2 = 100 in log-likelihood.
