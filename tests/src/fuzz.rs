@@ -25,6 +25,7 @@ use prognos_core::filter::resample::Resampling;
 use prognos_core::filter::ukf::{SigmaParams, Ukf};
 use prognos_core::learn::ar::{Oriv, OrivConfig};
 use prognos_core::learn::gp::{GaussianProcess, GpTransition, GpUkf};
+use prognos_core::learn::gp_rate::{RateScaledGpUkf, RateScaledTransition};
 use prognos_core::pipeline::edge::{EdgeConfig, EdgeMonitor};
 use prognos_core::pipeline::reaction_wheel::{ReactionWheel, ReactionWheelConfig};
 use prognos_core::pipeline::scooter::{Scooter, ScooterConfig};
@@ -436,6 +437,48 @@ pub fn gp_ukf_imm(feed: &mut Feed<'_>) -> Result<(), String> {
                 check_symmetric_psd(&label, imm.covariance(), 1e-9)?;
             }
             Err(e) => check_unchanged(&label, &before, &imm, &e)?,
+        }
+    }
+    Ok(())
+}
+
+/// The GP-UKF with the online log-rate state `[r, theta]` (the bearing's unseen-trial filter).
+pub fn gp_rate_ukf(feed: &mut Feed<'_>) -> Result<(), String> {
+    let gp = drift_gp()?;
+    let mut filter = RateScaledGpUkf::<f64, 2, 1, 2, 3, 5>::new(
+        RateScaledTransition {
+            gp: &gp,
+            measurement_std: 0.05,
+            pivot: 0.5,
+        },
+        Vector2::new(0.2, 0.0),
+        Matrix2::new(0.01, 0.0, 0.0, 0.1),
+        0.0025,
+        1e-5,
+        SigmaParams::default(),
+    )
+    .map_err(|e| e.to_string())?;
+    for k in 0..MAX_STEPS {
+        if feed.is_empty() {
+            break;
+        }
+        let u = Vector1::new(feed.around(0.1, 0.05));
+        let short = feed.rare();
+        let z = [feed.around(0.2 + 0.01 * k as f64, 0.05)];
+        let z: &[f64] = if short { &[] } else { &z };
+        let label = format!("rate-scaled GP-UKF step {k}");
+        let before = state_bits(&filter);
+        match filter.step(&u, z) {
+            Ok(r) => {
+                if r.log_likelihood.nan() || r.innovation_variance.nan() {
+                    return Err(format!("{label}: NaN in {r:?}"));
+                }
+                if !all_finite(filter.state().iter().copied()) {
+                    return Err(format!("{label}: state {:?}", filter.state()));
+                }
+                check_symmetric_psd(&label, filter.covariance(), 1e-9)?;
+            }
+            Err(e) => check_unchanged(&label, &before, &filter, &e)?,
         }
     }
     Ok(())

@@ -93,6 +93,11 @@ proptest! {
     }
 
     #[test]
+    fn gp_ukf_with_rate_state(v in values(200)) {
+        run(fuzz::gp_rate_ukf, &v)?;
+    }
+
+    #[test]
     fn oriv(v in values(400)) {
         run(fuzz::oriv, &v)?;
     }
