@@ -130,6 +130,9 @@ pub enum Command {
         /// Base seed.
         #[arg(long, default_value_t = 20261201)]
         seed: u64,
+        /// Only this system (linear, scooter, wheel, valve, bearing); all by default.
+        #[arg(long)]
+        system: Option<String>,
         /// Also write the table to this file (atomically).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -401,8 +404,14 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             }
             Ok(())
         }
-        Command::Faults { runs, seed, out } => {
-            let text = crate::faults::table(runs, seed);
+        Command::Faults {
+            runs,
+            seed,
+            system,
+            out,
+        } => {
+            let text = crate::faults::table(runs, seed, system.as_deref())
+                .map_err(|e| SimError::Run(e.to_string()))?;
             print!("{text}");
             if let Some(path) = out {
                 crate::output::write_text(&path, &text)?;

@@ -425,7 +425,13 @@ pub fn gp_ukf_imm(feed: &mut Feed<'_>) -> Result<(), String> {
         }
         let label = format!("IMM step {k}");
         let before = state_bits(&imm);
-        match imm.step(&u, z) {
+        // Plain, gated (the gate itself from the feed) and predict-only cycles.
+        let result = match k % 3 {
+            0 => imm.step(&u, z),
+            1 => imm.step_gated(&u, z, feed.around(10.83, 10.0)),
+            _ => imm.predict(&u),
+        };
+        match result {
             Ok(r) => {
                 let total: f64 = r.probabilities.sum();
                 if !((total - 1.0).abs() < 1e-9) || r.probabilities.iter().any(|&p| !(p >= 0.0)) {

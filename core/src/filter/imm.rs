@@ -16,8 +16,19 @@ pub trait ModeFilter<T: Real, const NX: usize>: Clone {
     fn mode_covariance(&self) -> SMatrix<T, NX, NX>;
     /// Replaces the estimate by the mixed one (Table 3, lines 4-5).
     fn reinitialise(&mut self, x: &SVector<T, NX>, p: &SMatrix<T, NX, NX>) -> Result<(), Error>;
-    /// One predict-update step; returns `ln N(e; 0, S)` of the innovation (Table 3, line 7).
-    fn filter_step(&mut self, input: &Self::Input, z: &[T]) -> Result<T, Error>;
+    /// One predict-update step (Table 3, lines 6-7). Errors leave the filter unchanged.
+    fn filter_step(&mut self, input: &Self::Input, z: &[T]) -> Result<ModeUpdate<T>, Error>;
+    /// The prediction alone, for a cycle whose measurement is missing or rejected.
+    fn predict_step(&mut self, input: &Self::Input) -> Result<(), Error>;
+}
+
+/// What one mode's update reports to the IMM.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModeUpdate<T> {
+    /// `ln N(e; 0, S)` of the innovation (Table 3, line 7).
+    pub log_likelihood: T,
+    /// Normalised innovation squared `e' S^-1 e`.
+    pub nis: T,
 }
 
 /// What one IMM step did.
@@ -27,8 +38,15 @@ pub struct ImmReport<T: Real, const K: usize> {
     pub log_likelihoods: SVector<T, K>,
     /// Posterior mode probabilities.
     pub probabilities: SVector<T, K>,
-    /// `ln sum_j c_j N(e_j; 0, S_j)`: the log evidence of the measurement under the mixture.
+    /// Each mode's normalised innovation squared (zero for a mode with no predicted
+    /// probability and for a predict-only cycle).
+    pub nis: SVector<T, K>,
+    /// `ln sum_j c_j N(e_j; 0, S_j)`: the log evidence of the measurement under the mixture
+    /// (zero for a predict-only cycle).
     pub log_evidence: T,
+    /// Whether the measurement was fused; `false` for a predict-only cycle (missing, or
+    /// rejected by the gate of [`Imm::step_gated`]).
+    pub fused: bool,
     /// Safeguards that acted in the mixing and fusion (covariance symmetrised).
     pub flags: Flags,
 }
@@ -106,50 +124,143 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
 
     /// One IMM cycle (Table 3). Any filter error leaves the whole IMM unchanged.
     pub fn step(&mut self, input: &F::Input, z: &[T]) -> Result<ImmReport<T, K>, Error> {
+        self.update(input, z, None)
+    }
+
+    /// [`Self::step`] with an outlier gate: when no mode with a predicted probability explains
+    /// the measurement (every mode's NIS above `gate`, e.g. the chi-square 99.9 % point), the
+    /// cycle is predict-only and the report says it was not fused.
+    pub fn step_gated(
+        &mut self,
+        input: &F::Input,
+        z: &[T],
+        gate: T,
+    ) -> Result<ImmReport<T, K>, Error> {
+        if !(gate.finite() && gate > T::zero()) {
+            return Err(Error::InvalidParameter("gate"));
+        }
+        self.update(input, z, Some(gate))
+    }
+
+    /// A predict-only cycle (missing measurement): mixing and every mode's prediction; the
+    /// mode probabilities become the predicted ones (Table 3, line 2).
+    pub fn predict(&mut self, input: &F::Input) -> Result<ImmReport<T, K>, Error> {
+        let predicted = self.transition.transpose() * self.probabilities;
+        let (mut filters, mut flags) = self.mixed(&predicted)?;
+        for filter in filters.iter_mut() {
+            filter.predict_step(input)?;
+        }
+        let total = predicted.sum();
+        if !(total.finite() && total > T::zero()) {
+            return Err(Error::NonFiniteState);
+        }
+        let probabilities = predicted / total;
+        self.commit(filters, probabilities, &mut flags)?;
+        Ok(ImmReport {
+            log_likelihoods: SVector::zeros(),
+            probabilities,
+            nis: SVector::zeros(),
+            log_evidence: T::zero(),
+            fused: false,
+            flags,
+        })
+    }
+
+    /// Lines 3-5: every filter with a predicted probability re-initialised from the mixture.
+    fn mixed(&self, predicted: &SVector<T, K>) -> Result<([F; K], Flags), Error> {
+        let tiny = T::MIN_POSITIVE;
+        let mut filters = self.filters.clone();
+        let mut flags = Flags::NONE;
+        for ((filter, column), &c_j) in filters
+            .iter_mut()
+            .zip(self.transition.column_iter())
+            .zip(predicted.iter())
+        {
+            if c_j <= tiny {
+                continue;
+            }
+            // Mixing weights mu^{i|j} = h_ij mu_i / c_j, mixed mean and covariance.
+            let mut x0 = SVector::<T, NX>::zeros();
+            for (src, (&h, &mu)) in self
+                .filters
+                .iter()
+                .zip(column.iter().zip(self.probabilities.iter()))
+            {
+                x0 += src.mode_state() * (h * mu / c_j);
+            }
+            let mut p0 = SMatrix::<T, NX, NX>::zeros();
+            for (src, (&h, &mu)) in self
+                .filters
+                .iter()
+                .zip(column.iter().zip(self.probabilities.iter()))
+            {
+                let d = src.mode_state() - x0;
+                p0 += (src.mode_covariance() + d * d.transpose()) * (h * mu / c_j);
+            }
+            if symmetrise(&mut p0) {
+                flags.insert(Flags::COVARIANCE_SYMMETRISED);
+            }
+            filter.reinitialise(&x0, &p0)?;
+        }
+        Ok((filters, flags))
+    }
+
+    /// Lines 9-10 and the state change: fuses `filters` with `probabilities` and keeps them
+    /// if the result is finite.
+    fn commit(
+        &mut self,
+        filters: [F; K],
+        probabilities: SVector<T, K>,
+        flags: &mut Flags,
+    ) -> Result<(), Error> {
+        let (x, p, symmetrised) = fuse(&filters, &probabilities);
+        if symmetrised {
+            flags.insert(Flags::COVARIANCE_SYMMETRISED);
+        }
+        if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
+            return Err(Error::NonFiniteState);
+        }
+        self.filters = filters;
+        self.probabilities = probabilities;
+        self.x = x;
+        self.p = p;
+        Ok(())
+    }
+
+    fn update(
+        &mut self,
+        input: &F::Input,
+        z: &[T],
+        gate: Option<T>,
+    ) -> Result<ImmReport<T, K>, Error> {
         // Line 2: predicted mode probabilities c_j = sum_i h_ij mu_i.
         let predicted = self.transition.transpose() * self.probabilities;
         let tiny = T::MIN_POSITIVE;
-        let mut filters = self.filters.clone();
+        let (mut filters, mut flags) = self.mixed(&predicted)?;
         let mut log_weights = SVector::<T, K>::zeros();
         let mut log_likelihoods = SVector::<T, K>::zeros();
-        let mut flags = Flags::NONE;
-        for (((filter, column), (&c_j, lw)), ll) in filters
-            .iter_mut()
-            .zip(self.transition.column_iter())
-            .zip(predicted.iter().zip(log_weights.iter_mut()))
-            .zip(log_likelihoods.iter_mut())
-        {
-            if c_j > tiny {
-                // Lines 3-5: mixing weights mu^{i|j} = h_ij mu_i / c_j, mixed mean and covariance.
-                let mut x0 = SVector::<T, NX>::zeros();
-                for (src, (&h, &mu)) in self
-                    .filters
-                    .iter()
-                    .zip(column.iter().zip(self.probabilities.iter()))
-                {
-                    x0 += src.mode_state() * (h * mu / c_j);
-                }
-                let mut p0 = SMatrix::<T, NX, NX>::zeros();
-                for (src, (&h, &mu)) in self
-                    .filters
-                    .iter()
-                    .zip(column.iter().zip(self.probabilities.iter()))
-                {
-                    let d = src.mode_state() - x0;
-                    p0 += (src.mode_covariance() + d * d.transpose()) * (h * mu / c_j);
-                }
-                if symmetrise(&mut p0) {
-                    flags.insert(Flags::COVARIANCE_SYMMETRISED);
-                }
-                filter.reinitialise(&x0, &p0)?;
-            }
+        let mut nis = SVector::<T, K>::zeros();
+        let mut explained = false;
+        for ((filter, &c_j), ((lw, ll), n)) in filters.iter_mut().zip(predicted.iter()).zip(
+            log_weights
+                .iter_mut()
+                .zip(log_likelihoods.iter_mut())
+                .zip(nis.iter_mut()),
+        ) {
             // Lines 6-7.
-            *ll = filter.filter_step(input, z)?;
+            let m = filter.filter_step(input, z)?;
+            (*ll, *n) = (m.log_likelihood, m.nis);
             *lw = if c_j > tiny {
-                c_j.ln() + *ll
+                explained |= gate.is_none_or(|g| m.nis <= g);
+                c_j.ln() + m.log_likelihood
             } else {
                 -T::MAX_FINITE
             };
+        }
+        if !explained {
+            return self
+                .predict(input)
+                .map(|report| ImmReport { nis, ..report });
         }
         // Line 8 in the log domain.
         let norm = log_sum_exp(log_weights.as_slice());
@@ -164,21 +275,13 @@ impl<T: Real, F: ModeFilter<T, NX>, const NX: usize, const K: usize> Imm<T, F, N
             return Err(Error::NonFiniteState);
         }
         let probabilities = unnormalised / total;
-        let (x, p, symmetrised) = fuse(&filters, &probabilities);
-        if symmetrised {
-            flags.insert(Flags::COVARIANCE_SYMMETRISED);
-        }
-        if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
-            return Err(Error::NonFiniteState);
-        }
-        self.filters = filters;
-        self.probabilities = probabilities;
-        self.x = x;
-        self.p = p;
+        self.commit(filters, probabilities, &mut flags)?;
         Ok(ImmReport {
             log_likelihoods,
             probabilities,
+            nis,
             log_evidence: norm,
+            fused: true,
             flags,
         })
     }
@@ -233,7 +336,12 @@ mod tests {
             self.p = p[(0, 0)];
             Ok(())
         }
-        fn filter_step(&mut self, _: &(), z: &[f64]) -> Result<f64, Error> {
+        fn predict_step(&mut self, _: &()) -> Result<(), Error> {
+            self.x += self.drift;
+            self.p += self.q;
+            Ok(())
+        }
+        fn filter_step(&mut self, _: &(), z: &[f64]) -> Result<ModeUpdate<f64>, Error> {
             let z = *z.first().ok_or(Error::InsufficientData)?;
             if !z.is_finite() {
                 return Err(Error::NonFiniteMeasurement);
@@ -245,7 +353,10 @@ mod tests {
             let k = pp / s;
             self.x = xp + k * e;
             self.p = (1.0 - k) * pp;
-            Ok(-0.5 * (e * e / s + (2.0 * core::f64::consts::PI * s).ln()))
+            Ok(ModeUpdate {
+                log_likelihood: -0.5 * (e * e / s + (2.0 * core::f64::consts::PI * s).ln()),
+                nis: e * e / s,
+            })
         }
     }
 
@@ -321,6 +432,39 @@ mod tests {
         // Bad configurations.
         let bad = SMatrix::<f64, 2, 2>::new(0.9, 0.2, 0.1, 0.9);
         assert!(Imm::new([kf(0.0), kf(1.0)], Vector2::new(0.5, 0.5), bad).is_err());
+    }
+
+    #[test]
+    fn missing_and_gated_cycles_predict_only() {
+        let new = || {
+            Imm::<f64, DriftKf, 1, 2>::new(
+                [kf(0.0), kf(1.0)],
+                SVector::from([0.5, 0.5]),
+                Imm::<f64, DriftKf, 1, 2>::uniform_switching(0.9),
+            )
+            .unwrap()
+        };
+        // A missing cycle: probabilities become the predicted ones (uniform stays uniform),
+        // and the fused state is the mixture of the two drifts.
+        let mut imm = new();
+        let rep = imm.predict(&()).unwrap();
+        assert!(!rep.fused);
+        assert!((rep.probabilities[0] - 0.5).abs() < 1e-12);
+        assert!((imm.state()[0] - 0.5).abs() < 1e-12, "{}", imm.state()[0]);
+        assert!((imm.covariance()[(0, 0)] - (1.0 + 1e-4 + 0.25)).abs() < 1e-12);
+        // An outlier far from both modes (NIS ~ 1e4 against a 10.83 gate) is not fused: the
+        // gated IMM ends where a predict-only cycle does, the ungated one jumps toward it.
+        let (mut gated, mut plain, mut predicted) = (new(), new(), new());
+        let rep = gated.step_gated(&(), &[100.0], 10.83).unwrap();
+        assert!(!rep.fused && rep.nis.iter().all(|&n| n > 10.83), "{rep:?}");
+        predicted.predict(&()).unwrap();
+        assert_eq!(gated.state(), predicted.state());
+        assert_eq!(gated.probabilities(), predicted.probabilities());
+        assert!(plain.step(&(), &[100.0]).unwrap().fused);
+        assert!(plain.state()[0] > 50.0);
+        // A measurement one mode explains is fused, and the gate must be positive.
+        assert!(gated.step_gated(&(), &[1.2], 10.83).unwrap().fused);
+        assert!(gated.step_gated(&(), &[1.2], f64::NAN).is_err());
     }
 
     #[test]

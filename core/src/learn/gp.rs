@@ -10,7 +10,7 @@
 //! about 17 KB; keep it in a `static`).
 
 use crate::error::Error;
-use crate::filter::imm::ModeFilter;
+use crate::filter::imm::{ModeFilter, ModeUpdate};
 use crate::filter::ukf::{SigmaParams, Ukf};
 use crate::model::{Model, Observe, Stochastic};
 use crate::prognose::{EndOfLife, PredictionSettings, predict_eol};
@@ -424,6 +424,29 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         &self.transition
     }
 
+    /// The prediction of one cycle with input `u` (Table 2, lines 2-4), on a copy: the
+    /// predicted filter, its flags and whether the GP extrapolated.
+    fn predicted(&self, u: &SVector<T, NU>) -> Result<(Ukf<T, NX, NS>, Flags, bool), Error> {
+        if !all_finite(u.as_slice()) {
+            return Err(Error::NonFiniteInput);
+        }
+        // Table 2, line 3: Q_k from the GP variance at the prior mean.
+        let (_, var, extrapolating) = self.transition.predict(self.ukf.state(), u)?;
+        let q = SMatrix::<T, NX, NX>::from_diagonal(&var);
+        let mut ukf = self.ukf.clone();
+        ukf.set_process_noise(q)?;
+        let flags = ukf.predict(&self.transition, u, T::one())?;
+        Ok((ukf, flags, extrapolating))
+    }
+
+    /// A cycle without a measurement: the prediction alone. Errors leave the filter
+    /// unchanged; returns whether the GP extrapolated.
+    pub fn predict_only(&mut self, u: &SVector<T, NU>) -> Result<bool, Error> {
+        let (ukf, _, extrapolating) = self.predicted(u)?;
+        self.ukf = ukf;
+        Ok(extrapolating)
+    }
+
     /// One cycle: predict with input `u` (the load difference of the cycle that just ended),
     /// then fuse measurement `z`. Errors leave the filter unchanged.
     pub fn step(&mut self, u: &SVector<T, NU>, z: &[T]) -> Result<GpUkfReport<T, NX>, Error> {
@@ -436,15 +459,7 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         if !all_finite(z) {
             return Err(Error::NonFiniteMeasurement);
         }
-        if !all_finite(u.as_slice()) {
-            return Err(Error::NonFiniteInput);
-        }
-        // Table 2, line 3: Q_k from the GP variance at the prior mean.
-        let (_, var, extrapolating) = self.transition.predict(self.ukf.state(), u)?;
-        let q = SMatrix::<T, NX, NX>::from_diagonal(&var);
-        let mut ukf = self.ukf.clone();
-        ukf.set_process_noise(q)?;
-        let mut flags = ukf.predict(&self.transition, u, T::one())?;
+        let (mut ukf, mut flags, extrapolating) = self.predicted(u)?;
         let report = ukf.update(&self.transition, u, z, &self.r)?;
         flags.insert(report.flags);
         let chol = Cholesky::new(report.innovation_cov).ok_or(Error::NotPositiveDefinite)?;
@@ -488,8 +503,14 @@ impl<T: Real, const NX: usize, const NU: usize, const D: usize, const M: usize, 
         self.ukf = ukf;
         Ok(())
     }
-    fn filter_step(&mut self, input: &SVector<T, NU>, z: &[T]) -> Result<T, Error> {
-        self.step(input, z).map(|r| r.log_likelihood)
+    fn filter_step(&mut self, input: &SVector<T, NU>, z: &[T]) -> Result<ModeUpdate<T>, Error> {
+        self.step(input, z).map(|r| ModeUpdate {
+            log_likelihood: r.log_likelihood,
+            nis: r.nis,
+        })
+    }
+    fn predict_step(&mut self, input: &SVector<T, NU>) -> Result<(), Error> {
+        self.predict_only(input).map(|_| ())
     }
 }
 

@@ -12,7 +12,7 @@
 
 use super::gp::{GaussianProcess, GpPrediction};
 use crate::error::Error;
-use crate::filter::imm::ModeFilter;
+use crate::filter::imm::{ModeFilter, ModeUpdate};
 use crate::filter::ukf::{SigmaParams, Ukf};
 use crate::model::{Model, Observe, Stochastic, gaussian_log_likelihood};
 use crate::random::standard_normal;
@@ -157,6 +157,8 @@ impl<T: Real, const D: usize, const M: usize, const NX: usize, const NU: usize>
 pub struct RateScaledReport<T: Real> {
     pub innovation: T,
     pub innovation_variance: T,
+    /// Normalised innovation squared, the test ratio of an outlier gate.
+    pub nis: T,
     /// `ln N(innovation; 0, S)`, the mode likelihood in an IMM.
     pub log_likelihood: T,
     /// The GP was queried outside its training range at the prior mean.
@@ -220,18 +222,9 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         &self.transition
     }
 
-    /// One cycle: predict with input `u`, then fuse measurement `z` (one value). Errors leave
-    /// the filter unchanged.
-    pub fn step(&mut self, u: &SVector<T, NU>, z: &[T]) -> Result<RateScaledReport<T>, Error> {
-        if z.len() != 1 {
-            return Err(Error::MeasurementLength {
-                expected: 1,
-                got: z.len(),
-            });
-        }
-        if !all_finite(z) {
-            return Err(Error::NonFiniteMeasurement);
-        }
+    /// The prediction of one cycle with input `u`, on a copy: the predicted filter, its
+    /// flags and whether the GP extrapolated.
+    fn predicted(&self, u: &SVector<T, NU>) -> Result<(Ukf<T, NX, NS>, Flags, bool), Error> {
         if !all_finite(u.as_slice()) {
             return Err(Error::NonFiniteInput);
         }
@@ -245,7 +238,31 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         }
         let mut ukf = self.ukf.clone();
         ukf.set_process_noise(q)?;
-        let mut flags = ukf.predict(&self.transition, u, T::one())?;
+        let flags = ukf.predict(&self.transition, u, T::one())?;
+        Ok((ukf, flags, p.extrapolating))
+    }
+
+    /// A cycle without a measurement: the prediction alone. Errors leave the filter
+    /// unchanged; returns whether the GP extrapolated.
+    pub fn predict_only(&mut self, u: &SVector<T, NU>) -> Result<bool, Error> {
+        let (ukf, _, extrapolating) = self.predicted(u)?;
+        self.ukf = ukf;
+        Ok(extrapolating)
+    }
+
+    /// One cycle: predict with input `u`, then fuse measurement `z` (one value). Errors leave
+    /// the filter unchanged.
+    pub fn step(&mut self, u: &SVector<T, NU>, z: &[T]) -> Result<RateScaledReport<T>, Error> {
+        if z.len() != 1 {
+            return Err(Error::MeasurementLength {
+                expected: 1,
+                got: z.len(),
+            });
+        }
+        if !all_finite(z) {
+            return Err(Error::NonFiniteMeasurement);
+        }
+        let (mut ukf, mut flags, extrapolating) = self.predicted(u)?;
         let report = ukf.update(&self.transition, u, z, &Matrix1::new(self.r_var))?;
         flags.insert(report.flags);
         let s = report.innovation_cov.x;
@@ -258,8 +275,9 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         Ok(RateScaledReport {
             innovation: report.innovation.x,
             innovation_variance: s,
+            nis: report.nis,
             log_likelihood,
-            extrapolating: p.extrapolating,
+            extrapolating,
             flags,
         })
     }
@@ -283,8 +301,14 @@ impl<T: Real, const NX: usize, const NU: usize, const D: usize, const M: usize, 
         self.ukf = ukf;
         Ok(())
     }
-    fn filter_step(&mut self, input: &SVector<T, NU>, z: &[T]) -> Result<T, Error> {
-        self.step(input, z).map(|r| r.log_likelihood)
+    fn filter_step(&mut self, input: &SVector<T, NU>, z: &[T]) -> Result<ModeUpdate<T>, Error> {
+        self.step(input, z).map(|r| ModeUpdate {
+            log_likelihood: r.log_likelihood,
+            nis: r.nis,
+        })
+    }
+    fn predict_step(&mut self, input: &SVector<T, NU>) -> Result<(), Error> {
+        self.predict_only(input).map(|_| ())
     }
 }
 

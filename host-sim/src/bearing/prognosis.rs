@@ -37,6 +37,10 @@ pub struct PrognosisSettings {
     pub horizon: u32,
     /// Modes with a probability below this are not propagated (their weight is renormalised).
     pub min_mode_probability: f64,
+    /// NIS gate of the IMM ([`Imm::step_gated`]): a feature no mode explains is not fused.
+    /// `None`: every finite feature is fused. A non-finite feature (a missing sample) is
+    /// always a predict-only cycle.
+    pub outlier_gate: Option<f64>,
     pub seed: u64,
 }
 
@@ -50,6 +54,7 @@ impl Default for PrognosisSettings {
             stay_probability: 0.98,
             horizon: 1500,
             min_mode_probability: 1e-3,
+            outlier_gate: None,
             seed: 7,
         }
     }
@@ -78,6 +83,8 @@ pub struct TrialPrognosis {
     pub estimates: Vec<f64>,
     /// Cycles in which some mode's GP extrapolated.
     pub extrapolating_cycles: usize,
+    /// Cycles whose feature was missing or rejected by the outlier gate (predict-only).
+    pub rejected_cycles: usize,
 }
 
 /// A mode of the bearing IMM: a GP-UKF (state `r`) or the rate-scaled GP-UKF (state
@@ -221,6 +228,7 @@ fn prognose_with<const NX: usize, const K: usize, F: BearingMode<NX>>(
         mode_probabilities: vec![imm.probabilities().iter().copied().collect()],
         estimates: vec![imm.state()[0]],
         extrapolating_cycles: 0,
+        rejected_cycles: 0,
     };
     let mut states = vec![SVector::<f64, NX>::zeros(); n];
     let mut times = vec![0.0; n * K];
@@ -231,8 +239,16 @@ fn prognose_with<const NX: usize, const K: usize, F: BearingMode<NX>>(
         if imm.filters().iter().any(|f| f.extrapolating(&u)) {
             out.extrapolating_cycles += 1;
         }
-        imm.step(&u, &[trial.feature[k]])
-            .map_err(|e| anyhow::anyhow!("cycle {k}: {e}"))?;
+        let z = trial.feature[k];
+        let report = match settings.outlier_gate {
+            _ if !z.is_finite() => imm.predict(&u),
+            Some(gate) => imm.step_gated(&u, &[z], gate),
+            None => imm.step(&u, &[z]),
+        }
+        .map_err(|e| anyhow::anyhow!("cycle {k}: {e}"))?;
+        if !report.fused {
+            out.rejected_cycles += 1;
+        }
         out.mode_probabilities
             .push(imm.probabilities().iter().copied().collect());
         out.estimates.push(imm.state()[0]);
