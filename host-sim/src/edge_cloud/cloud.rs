@@ -183,6 +183,14 @@ impl CloudPrognoser {
             && previous.is_some_and(|p| smoothed - p > self.config.diff_threshold)
         {
             self.change = Some((t_s, smoothed));
+            if self.config.redraw_c_at_change {
+                // `c` is unobserved before the change, but resampling on `b` has thinned its
+                // prior draws to a few values: draw it afresh from its prior.
+                let c_prior = self.config.c_prior;
+                for x in self.filter.particles_mut().iter_mut() {
+                    x.y = log_uniform(&mut self.rng, c_prior);
+                }
+            }
         }
         let trigger_s = self.trigger_s.unwrap_or(t_s);
         let input = match self.change {

@@ -109,6 +109,9 @@ pub struct EdgeCloudConfig {
     pub b_prior: [f64; 2],
     /// Log-uniform prior range of `c`, 1/min^2.
     pub c_prior: [f64; 2],
+    /// Draw `c` afresh from its prior at the detected change (resampling during the
+    /// exponential stage has thinned its draws from the trigger to a few values).
+    pub redraw_c_at_change: bool,
     /// Measurement noise std of the smoothed HI, relative part.
     pub relative_noise: f64,
     /// Measurement noise std of the smoothed HI, absolute floor.
@@ -144,6 +147,7 @@ impl Default for EdgeCloudConfig {
             c_walk_var: 1e-5,
             b_prior: [1e-3, 1.0],
             c_prior: [1e-3, 10.0],
+            redraw_c_at_change: true,
             relative_noise: 0.2,
             absolute_noise: 0.01,
             max_rul_s: 1e6,
