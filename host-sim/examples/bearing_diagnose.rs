@@ -16,6 +16,9 @@ use prognos_sim::bearing::train::{
 use prognos_sim::bearing::trial::{Trial, TrialGenerator};
 use rayon::prelude::*;
 
+/// One test trial: its CSV rows, metrics, and (in band, predictions) by fifth of life.
+type TrialDump = (String, TrialMetrics, [(usize, usize); 5]);
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let first_seed: u64 = args.get(1).map_or(Ok(100), |s| s.parse())?;
@@ -62,7 +65,7 @@ fn main() -> anyhow::Result<()> {
         .iter()
         .map(|g| prior2(g))
         .collect::<anyhow::Result<_>>()?;
-    let rows: Vec<(String, TrialMetrics, [(usize, usize); 5])> = test_set
+    let rows: Vec<TrialDump> = test_set
         .par_iter()
         .map(|t| {
             let p = match mode.as_str() {

@@ -500,7 +500,8 @@ impl TrainedGp {
     }
 
     /// Mean and latent variance by the textbook dense formulas with an explicit inverse of
-    /// `K + sigma_n^2 I` (an independent check of the core predictor).
+    /// `K + sigma_n^2 I` (an independent check of the core predictor; for a GP of [`train`],
+    /// not of [`train_sparse`]).
     pub fn predict_dense(&self, x: &[f64; GP_INPUTS]) -> (f64, f64) {
         let k = gram(&self.hyper, &self.inputs);
         let kinv = k.try_inverse().unwrap_or_else(|| DMatrix::zeros(1, 1));
