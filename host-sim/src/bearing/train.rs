@@ -1,7 +1,8 @@
 //! Host training of the dynamic GP (Anger et al. 2012, Eqs. 8-11): inputs `(r_k, du_k)`,
 //! output `r_{k+1} - r_k` of the low-pass filtered feature; SE-ARD hyperparameters by
 //! maximising the log marginal likelihood (Nelder-Mead from argmin on the log-parameters);
-//! weights exported for the core's fixed-size [`GaussianProcess`].
+//! weights (subset of data, [`train`], or FITC on all pairs, [`train_sparse`]) exported for the
+//! core's fixed-size [`GaussianProcess`].
 
 use super::trial::{Trial, zero_phase_lowpass};
 use argmin::core::{CostFunction, Executor, State};
