@@ -303,7 +303,7 @@ pub fn valve_rows(runs: usize, seed: u64) -> Vec<FaultRow> {
         .collect()
 }
 
-/// The bearing: the campaign's method (one GP on 8 training trials, GP-UKF with the online
+/// The bearing: the campaign's method (one sparse GP on 8 training trials, GP-UKF with the online
 /// log-rate state, the IMM's NIS gate at the chi-square 99.9 % point in both cases) on
 /// `runs` test trials, faults on the feature from cycle 1 on (cycle 0 initialises the
 /// filter): outliers of 1.0, ten times the feature's noise std and the whole normalised
@@ -311,8 +311,8 @@ pub fn valve_rows(runs: usize, seed: u64) -> Vec<FaultRow> {
 /// |median RUL - true RUL| (cycles).
 pub fn bearing_rows(runs: usize, seed: u64) -> Vec<FaultRow> {
     use crate::bearing::prognosis::{PrognosisSettings, prognose_rate_scaled};
-    use crate::bearing::tables::{RATE_WALK_VARIANCE, rate_state_prior};
-    use crate::bearing::train::{Dataset, GP_POINTS, feature_noise_variance, train};
+    use crate::bearing::tables::{RATE_WALK_VARIANCE, gp_for, rate_state_prior};
+    use crate::bearing::train::feature_noise_variance;
     use crate::bearing::trial::TrialGenerator;
     const TRAINING: u64 = 8;
     let generator = TrialGenerator::new();
@@ -323,9 +323,7 @@ pub fn bearing_rows(runs: usize, seed: u64) -> Vec<FaultRow> {
         .collect();
     let (training, test) = trials.split_at(TRAINING as usize);
     let training: Vec<_> = training.iter().collect();
-    let Ok(gp) =
-        train(&Dataset::from_trials(&training), GP_POINTS).and_then(|g| g.to_core::<GP_POINTS>())
-    else {
+    let Ok(gp) = gp_for(&training) else {
         return vec![lost("clean"), lost(FAULTY)];
     };
     let Ok(prior) = rate_state_prior::<2>(&gp, &training) else {

@@ -4,7 +4,9 @@
 //!
 //! The host computes, for `M` training (or inducing) inputs `X`, the lower Cholesky factor
 //! `L L^T = K(X, X) + sigma_n^2 I` and `alpha = (K + sigma_n^2 I)^-1 (y - m)` with a constant
-//! mean `m`. On board the mean is `m + k_*^T alpha` (Eq. 6) and the latent variance
+//! mean `m` (a sparse GP, e.g. FITC with `M` inducing inputs, fits the same form with its own
+//! `alpha` and `L L^T = C`; see the bearing host training). On board the mean is
+//! `m + k_*^T alpha` (Eq. 6) and the latent variance
 //! `k(x_*, x_*) - |L^-1 k_*|^2` (Eq. 7): one kernel row and one triangular solve, no
 //! allocation. Size: `(M (D + 1) + M^2 + 3 D + 4) * size_of::<T>()` bytes (M = 64, D = 2, f32:
 //! about 17 KB; keep it in a `static`).

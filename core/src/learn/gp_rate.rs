@@ -7,7 +7,7 @@
 //! State `[r, theta_0, .., theta_{NX-2}]`: the log rate scale is a polynomial in the damage,
 //! `theta(r) = theta_0 + theta_1 (r - pivot) + ..`; with NX = 2 a constant rate, with NX = 3 a
 //! tilt as well (a unit whose growth accelerates more, or less, than the GP's training units).
-//! Measurement `r` (noise variance `r_var`). The `theta` entries follow a random walk with
+//! Measurement `r` (noise variance constant or growing with `r`, [`FeatureNoise`]). The `theta` entries follow a random walk with
 //! variance `rate_walk_variance` per cycle each. Allocation-free like [`super::gp`].
 
 use super::gp::{GaussianProcess, GpPrediction};
@@ -24,6 +24,40 @@ use rand_core::Rng;
 /// Largest `|theta|` the transition uses (a scale of `e^8`, about 3000, is far outside any
 /// plausible rate; the clamp keeps `e^theta` finite for wild sigma points).
 pub const MAX_LOG_RATE: f64 = 8.0;
+
+/// Measurement noise of the feature that grows with the feature, `var(r) = floor + growth r^2`:
+/// an additive part (background noise in the band) and a part proportional to the fault
+/// line's amplitude (impulse amplitude scatter and arrival jitter). `growth = 0` is a
+/// constant `R`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FeatureNoise<T> {
+    pub floor: T,
+    pub growth: T,
+}
+
+impl<T: Real> FeatureNoise<T> {
+    /// A constant variance.
+    pub fn constant(variance: T) -> Self {
+        Self {
+            floor: variance,
+            growth: T::zero(),
+        }
+    }
+
+    /// `E[var(r)]` for `r ~ N(mean, variance)`: `floor + growth (mean^2 + variance)`.
+    pub fn expected_variance(&self, mean: T, variance: T) -> T {
+        self.floor + self.growth * (mean * mean + variance.max(T::zero()))
+    }
+
+    fn validate(&self) -> Result<(), Error> {
+        let floor_ok = self.floor.finite() && self.floor > T::zero();
+        let growth_ok = self.growth.finite() && self.growth >= T::zero();
+        if !(floor_ok && growth_ok) {
+            return Err(Error::InvalidParameter("r"));
+        }
+        Ok(())
+    }
+}
 
 /// Compile-time check that the GP input is `r` followed by the input.
 struct InputSize<const D: usize, const NU: usize>;
@@ -180,7 +214,7 @@ pub struct RateScaledGpUkf<
 > {
     ukf: Ukf<T, NX, NS>,
     transition: RateScaledTransition<'a, T, D, M>,
-    r_var: T,
+    noise: FeatureNoise<T>,
     rate_walk_variance: T,
 }
 
@@ -188,7 +222,8 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
     RateScaledGpUkf<'a, T, NX, NU, D, M, NS>
 {
     /// Prior `N(x0, p0)` over `[r, theta]` (the `theta` prior is the spread of rates over the
-    /// training units), measurement noise variance `r_var`, rate random walk variance per cycle.
+    /// training units), measurement noise variance `r_var` (constant; see
+    /// [`RateScaledGpUkf::set_feature_noise`]), rate random walk variance per cycle.
     pub fn new(
         transition: RateScaledTransition<'a, T, D, M>,
         x0: SVector<T, NX>,
@@ -197,9 +232,8 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         rate_walk_variance: T,
         params: SigmaParams<T>,
     ) -> Result<Self, Error> {
-        if !(r_var.finite() && r_var > T::zero()) {
-            return Err(Error::InvalidParameter("r"));
-        }
+        let noise = FeatureNoise::constant(r_var);
+        noise.validate()?;
         if !(rate_walk_variance.finite() && rate_walk_variance >= T::zero()) {
             return Err(Error::InvalidParameter("rate walk variance"));
         }
@@ -207,9 +241,21 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
         Ok(Self {
             ukf,
             transition,
-            r_var,
+            noise,
             rate_walk_variance,
         })
+    }
+
+    /// Replaces the constant measurement variance by a law that grows with `r`; an invalid law
+    /// is an error and changes nothing.
+    pub fn set_feature_noise(&mut self, noise: FeatureNoise<T>) -> Result<(), Error> {
+        noise.validate()?;
+        self.noise = noise;
+        Ok(())
+    }
+
+    pub fn feature_noise(&self) -> &FeatureNoise<T> {
+        &self.noise
     }
 
     pub fn state(&self) -> &SVector<T, NX> {
@@ -263,7 +309,13 @@ impl<'a, T: Real, const NX: usize, const NU: usize, const D: usize, const M: usi
             return Err(Error::NonFiniteMeasurement);
         }
         let (mut ukf, mut flags, extrapolating) = self.predicted(u)?;
-        let report = ukf.update(&self.transition, u, z, &Matrix1::new(self.r_var))?;
+        // R at the prior of r: the noise law's expectation over the predicted r.
+        let (r_mean, r_var) = (
+            feature(ukf.state()),
+            ukf.covariance().get((0, 0)).copied().unwrap_or(T::zero()),
+        );
+        let r_noise = self.noise.expected_variance(r_mean, r_var);
+        let report = ukf.update(&self.transition, u, z, &Matrix1::new(r_noise))?;
         flags.insert(report.flags);
         let s = report.innovation_cov.x;
         if !(s > T::zero()) {
@@ -386,6 +438,65 @@ mod tests {
         let mut buf = [(0.0, 0.0); 100];
         let s = crate::prognose::rul_distribution(&times, &[1.0; 100], &mut buf).unwrap();
         assert!((s.median - 27.0).abs() <= 2.0, "median {}", s.median);
+    }
+
+    #[test]
+    fn a_noise_law_growing_with_r_trusts_late_measurements_less() {
+        let law = FeatureNoise::<f64> {
+            floor: 1e-4,
+            growth: 4e-3,
+        };
+        // E[floor + growth r^2] over r ~ N(0.5, 0.01).
+        assert!((law.expected_variance(0.5, 0.01) - (1e-4 + 4e-3 * 0.26)).abs() < 1e-12);
+        let gp = flat_gp();
+        let mut constant = filter(&gp);
+        let before = constant.clone();
+        assert!(
+            constant
+                .set_feature_noise(FeatureNoise {
+                    floor: 0.0,
+                    growth: 1.0
+                })
+                .is_err()
+        );
+        assert!(
+            constant
+                .set_feature_noise(FeatureNoise {
+                    floor: 1e-4,
+                    growth: f64::NAN
+                })
+                .is_err()
+        );
+        assert_eq!(constant.feature_noise(), before.feature_noise());
+        constant
+            .set_feature_noise(FeatureNoise::constant(law.floor))
+            .unwrap();
+        let mut growing = constant.clone();
+        growing.set_feature_noise(law).unwrap();
+        // Both start at r = 0.9 with the same prior; one measurement 0.05 above the prior.
+        for f in [&mut constant, &mut growing] {
+            f.ukf.set_state(Vector2::new(0.9, 0.0)).unwrap();
+            f.ukf
+                .set_covariance(Matrix2::new(1e-3, 0.0, 0.0, 0.01))
+                .unwrap();
+            f.step(&Vector1::new(0.5), &[0.96]).unwrap();
+        }
+        let (c, g) = (constant.state()[0], growing.state()[0]);
+        // Prior mean 0.91. Constant R = 1e-4: gain about 0.9; growing R about 3.4e-3: gain
+        // about 0.23.
+        assert!(
+            c > 0.95 && g < 0.93 && g > 0.91,
+            "constant {c}, growing {g}"
+        );
+        // At r near 0 the law is the floor and both filters agree.
+        let mut a = filter(&gp);
+        a.set_feature_noise(FeatureNoise::constant(law.floor))
+            .unwrap();
+        let mut b = a.clone();
+        b.set_feature_noise(law).unwrap();
+        a.step(&Vector1::new(0.5), &[0.02]).unwrap();
+        b.step(&Vector1::new(0.5), &[0.02]).unwrap();
+        assert!((a.state()[0] - b.state()[0]).abs() < 1e-4);
     }
 
     #[test]

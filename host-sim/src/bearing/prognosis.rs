@@ -9,7 +9,7 @@ use nalgebra::{Matrix1, SMatrix, SVector, Vector1};
 use prognos_core::filter::imm::{Imm, ModeFilter};
 use prognos_core::filter::ukf::SigmaParams;
 use prognos_core::learn::gp::{GaussianProcess, GpTransition, GpUkf, StateThreshold, sample_rul};
-use prognos_core::learn::gp_rate::{RateScaledGpUkf, RateScaledTransition};
+use prognos_core::learn::gp_rate::{FeatureNoise, RateScaledGpUkf, RateScaledTransition};
 use prognos_core::model::Stochastic;
 use prognos_core::prognose::rul_distribution;
 use rand_core::SeedableRng;
@@ -41,6 +41,9 @@ pub struct PrognosisSettings {
     /// `None`: every finite feature is fused. A non-finite feature (a missing sample) is
     /// always a predict-only cycle.
     pub outlier_gate: Option<f64>,
+    /// Measurement noise law of the rate-scaled GP-UKF (`None`: the constant
+    /// `measurement_variance`).
+    pub rate_feature_noise: Option<FeatureNoise<f64>>,
     pub seed: u64,
 }
 
@@ -55,6 +58,7 @@ impl Default for PrognosisSettings {
             horizon: 1500,
             min_mode_probability: 1e-3,
             outlier_gate: None,
+            rate_feature_noise: None,
             seed: 7,
         }
     }
@@ -182,22 +186,26 @@ pub fn prognose_rate_scaled<const NX: usize, const NS: usize, const K: usize>(
             x0[0] = z0;
             p0.row_mut(0).fill(0.0);
             p0.column_mut(0).fill(0.0);
-            p0[(0, 0)] = r;
-            v.push(
-                RateScaledGpUkf::new(
-                    RateScaledTransition {
-                        gp: *gp,
-                        measurement_std: r.sqrt(),
-                        pivot: prior.pivot,
-                    },
-                    x0,
-                    p0,
-                    r,
-                    rate_walk_variance,
-                    SigmaParams::default(),
-                )
-                .map_err(|e| anyhow::anyhow!("{e}"))?,
-            );
+            let noise = settings
+                .rate_feature_noise
+                .unwrap_or(FeatureNoise::constant(r));
+            p0[(0, 0)] = noise.expected_variance(z0, 0.0);
+            let mut f = RateScaledGpUkf::new(
+                RateScaledTransition {
+                    gp: *gp,
+                    measurement_std: r.sqrt(),
+                    pivot: prior.pivot,
+                },
+                x0,
+                p0,
+                r,
+                rate_walk_variance,
+                SigmaParams::default(),
+            )
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+            f.set_feature_noise(noise)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            v.push(f);
         }
         v.try_into().map_err(|_| anyhow::anyhow!("filter count"))?
     };

@@ -4,7 +4,7 @@
 use super::prognosis::{
     BearingGp, PrognosisSettings, RatePrior, TrialMetrics, metrics, prognose, prognose_rate_scaled,
 };
-use super::train::{Dataset, GP_POINTS, feature_noise_variance, rate_prior, train};
+use super::train::{Dataset, GP_POINTS, feature_noise_variance, rate_prior, train_sparse};
 use super::trial::{Trial, TrialGenerator};
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
@@ -82,8 +82,9 @@ impl Default for CampaignConfig {
     }
 }
 
-fn gp_for(trials: &[&Trial]) -> anyhow::Result<Box<BearingGp>> {
-    train(&Dataset::from_trials(trials), GP_POINTS)?.to_core::<GP_POINTS>()
+/// The GP of `trials`: FITC on all their pairs with `GP_POINTS` inducing inputs.
+pub fn gp_for(trials: &[&Trial]) -> anyhow::Result<Box<BearingGp>> {
+    train_sparse(&Dataset::from_trials(trials), GP_POINTS)?.to_core::<GP_POINTS>()
 }
 
 fn run<const K: usize>(

@@ -1,7 +1,7 @@
 //! Tests of the trained GP, the GP-UKF and the IMM against known functions.
 
 use super::prognosis::BearingGp;
-use super::train::{Dataset, GP_POINTS, TrainedGp, train};
+use super::train::{Dataset, GP_POINTS, TrainedGp, greedy_inducing, train, train_sparse};
 use nalgebra::{Matrix1, SVector, Vector1, Vector2};
 use prognos_core::filter::imm::Imm;
 use prognos_core::filter::ukf::SigmaParams;
@@ -13,9 +13,13 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 /// Noisy samples of `r' - r = f(r, du)` over r in [0, 1.1], du in [0, 0.4].
 fn dataset(f: impl Fn(f64, f64) -> f64, noise: f64, seed: u64) -> Dataset {
+    dataset_of(GP_POINTS, f, noise, seed)
+}
+
+fn dataset_of(n: usize, f: impl Fn(f64, f64) -> f64, noise: f64, seed: u64) -> Dataset {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut d = Dataset::default();
-    for _ in 0..GP_POINTS {
+    for _ in 0..n {
         let r = 1.1 * uniform01::<f64, _>(&mut rng);
         let du = 0.4 * uniform01::<f64, _>(&mut rng);
         d.inputs.push([r, du]);
@@ -286,5 +290,75 @@ fn rate_state_learns_an_unseen_units_rate_where_the_plain_gp_ukf_cannot() {
     assert!(
         plain_median > 1.2 * truth,
         "plain: median {plain_median}, true {truth}"
+    );
+}
+
+#[test]
+fn sparse_gp_matches_the_fitc_formulas_and_beats_a_subset_of_the_data() {
+    use nalgebra::{DMatrix, DVector};
+    let noise = 4e-3;
+    let data = dataset_of(600, known, noise, 21);
+    let gp = train_sparse(&data, GP_POINTS).unwrap();
+    let core = gp.to_core::<GP_POINTS>().unwrap();
+    // Textbook FITC (Snelson & Ghahramani 2006) from the same hyperparameters and inducing
+    // inputs: mean k_*^T A^-1 K_mn L^-1 y, variance k_** - q_** + k_*^T A^-1 k_*.
+    let h = gp.hyper;
+    let k = |a: &[f64; 2], b: &[f64; 2]| {
+        let q = ((a[0] - b[0]) / h.length_scales[0]).powi(2)
+            + ((a[1] - b[1]) / h.length_scales[1]).powi(2);
+        h.signal_variance * (-0.5 * q).exp()
+    };
+    let (picked, residual) = greedy_inducing(&h, &data.inputs, GP_POINTS);
+    let z: Vec<[f64; 2]> = picked.iter().map(|&i| data.inputs[i]).collect();
+    assert_eq!(z, gp.inputs);
+    let (n, m) = (data.inputs.len(), z.len());
+    let kmm = DMatrix::from_fn(m, m, |i, j| {
+        k(&z[i], &z[j])
+            + if i == j {
+                1e-6 * h.signal_variance
+            } else {
+                0.0
+            }
+    });
+    let knm = DMatrix::from_fn(n, m, |i, j| k(&data.inputs[i], &z[j]));
+    let lam = DMatrix::from_diagonal(&DVector::from_iterator(
+        n,
+        residual.iter().map(|d| 1.0 / (h.noise_variance + d)),
+    ));
+    let a_inv = (&kmm + knm.transpose() * &lam * &knm)
+        .try_inverse()
+        .unwrap();
+    let kmm_inv = kmm.clone().try_inverse().unwrap();
+    let y = DVector::from_iterator(n, data.targets.iter().map(|v| v - gp.mean_offset));
+    let w = &a_inv * knm.transpose() * &lam * y;
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(22);
+    let sod = train(&data, GP_POINTS)
+        .unwrap()
+        .to_core::<GP_POINTS>()
+        .unwrap();
+    let (mut err_sparse, mut err_sod) = (0.0, 0.0);
+    for _ in 0..200 {
+        let x = [
+            uniform01::<f64, _>(&mut rng),
+            0.4 * uniform01::<f64, _>(&mut rng),
+        ];
+        let ks = DVector::from_iterator(m, z.iter().map(|zi| k(&x, zi)));
+        let mean = gp.mean_offset + ks.dot(&w);
+        let var = h.signal_variance - ks.dot(&(&kmm_inv * &ks)) + ks.dot(&(&a_inv * &ks));
+        let p = core.predict(&Vector2::new(x[0], x[1])).unwrap();
+        assert!((p.mean - mean).abs() < 1e-7, "{} {mean}", p.mean);
+        assert!(
+            (p.latent_variance - var.max(0.0)).abs() < 1e-6 * h.signal_variance,
+            "{} {var}",
+            p.latent_variance
+        );
+        let truth = known(x[0], x[1]);
+        err_sparse += (p.mean - truth).abs();
+        err_sod += (sod.predict(&Vector2::new(x[0], x[1])).unwrap().mean - truth).abs();
+    }
+    // All 600 noisy pairs pin the function down better than 64 of them.
+    assert!(
+        err_sparse < 0.7 * err_sod,
+        "sparse {err_sparse}, subset {err_sod}"
     );
 }

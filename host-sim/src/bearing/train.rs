@@ -1,7 +1,8 @@
 //! Host training of the dynamic GP (Anger et al. 2012, Eqs. 8-11): inputs `(r_k, du_k)`,
 //! output `r_{k+1} - r_k` of the low-pass filtered feature; SE-ARD hyperparameters by
 //! maximising the log marginal likelihood (Nelder-Mead from argmin on the log-parameters);
-//! weights exported for the core's fixed-size [`GaussianProcess`].
+//! weights (subset of data, [`train`], or FITC on all pairs, [`train_sparse`]) exported for the
+//! core's fixed-size [`GaussianProcess`].
 
 use super::trial::{Trial, zero_phase_lowpass};
 use argmin::core::{CostFunction, Executor, State};
@@ -66,6 +67,34 @@ pub fn feature_noise_variance(trials: &[&Trial]) -> f64 {
         }
     }
     s / n.max(1) as f64
+}
+
+/// Noise law `var(r) = floor + growth r^2` of the measured feature around its low-passed
+/// course on the training trials: least squares of the squared residuals on `r^2` (the
+/// low-passed value), an unbiased fit of `E[e^2 | r]`. Both coefficients are kept positive
+/// (a floor of 1 % of the mean variance).
+pub fn feature_noise_law(trials: &[&Trial]) -> prognos_core::learn::gp_rate::FeatureNoise<f64> {
+    let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for t in trials {
+        let r = zero_phase_lowpass(&t.feature, TRAINING_SMOOTHING);
+        for (f, rk) in t.feature.iter().zip(&r).take(t.eol) {
+            let (x, y) = (rk * rk, (f - rk).powi(2));
+            n += 1.0;
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            sxy += x * y;
+        }
+    }
+    let mean_var = sy / f64::max(n, 1.0);
+    let det = n * sxx - sx * sx;
+    let growth = if det > 0.0 {
+        ((n * sxy - sx * sy) / det).max(0.0)
+    } else {
+        0.0
+    };
+    let floor = ((sy - growth * sx) / f64::max(n, 1.0)).max(0.01 * mean_var);
+    prognos_core::learn::gp_rate::FeatureNoise { floor, growth }
 }
 
 /// The training units' log-rate terms and the prior they give (see [`rate_prior`]).
@@ -328,6 +357,109 @@ pub fn fit(
     })
 }
 
+/// Greedy choice of `m` inducing inputs out of `x` by the sparse-GP criterion of the
+/// Nystrom / FITC approximation: each pick is the training input whose prior variance the
+/// inputs picked so far explain least, `k(x, x) - q(x, x)` (incomplete pivoted Cholesky).
+/// Once every input is explained to within the jitter, the remaining picks are spread evenly
+/// in time. Returns the picked indices and every input's residual `k(x_i, x_i) - q(x_i, x_i)`.
+pub fn greedy_inducing(h: &Hyper, x: &[[f64; GP_INPUTS]], m: usize) -> (Vec<usize>, Vec<f64>) {
+    let n = x.len();
+    let mut residual = vec![h.signal_variance; n];
+    let mut columns: Vec<Vec<f64>> = Vec::with_capacity(m);
+    let mut picked = Vec::with_capacity(m);
+    for _ in 0..m.min(n) {
+        let (p, &d) = residual
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !picked.contains(i))
+            .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(&a.0)))
+            .unwrap_or((0, &0.0));
+        // The rest is explained to within the jitter: fill up evenly in time below.
+        if d <= INDUCING_JITTER * h.signal_variance {
+            break;
+        }
+        let sd = d.sqrt();
+        let col: Vec<f64> = (0..n)
+            .map(|i| {
+                let dot: f64 = columns.iter().map(|c| c[i] * c[p]).sum();
+                (h.kernel(&x[i], &x[p]) - dot) / sd
+            })
+            .collect();
+        for (r, c) in residual.iter_mut().zip(&col) {
+            *r = (*r - c * c).max(0.0);
+        }
+        residual[p] = 0.0;
+        columns.push(col);
+        picked.push(p);
+    }
+    let missing = m.min(n) - picked.len();
+    let rest: Vec<usize> = (0..n).filter(|i| !picked.contains(i)).collect();
+    for j in 0..missing {
+        picked.push(rest[j * rest.len() / missing]);
+    }
+    (picked, residual)
+}
+
+/// Jitter on the inducing inputs' prior covariance, relative to the signal variance.
+const INDUCING_JITTER: f64 = 1e-6;
+
+/// Sparse GP on all of `data` with `m` inducing inputs (FITC, Snelson & Ghahramani 2006): the
+/// hyperparameters of [`train`] (fitted on `m` points spread in time), inducing inputs by
+/// [`greedy_inducing`], and weights from every training pair, each with noise variance
+/// `sigma_n^2 + k(x_i, x_i) - q(x_i, x_i)`. The predictor keeps the core's form
+/// `mean + k_*^T alpha`, `k_** - k_*^T C^-1 k_*`, with
+/// `alpha = (K_mm + K_mn L^-1 K_nm)^-1 K_mn L^-1 (y - mean)` and
+/// `C = K_mm + K_mm (K_mn L^-1 K_nm)^-1 K_mm` (`L` the per-pair noise): the FITC predictive
+/// variance `k_** - q_** + k_*^T (K_mm + K_mn L^-1 K_nm)^-1 k_*` rewritten.
+pub fn train_sparse(data: &Dataset, m: usize) -> anyhow::Result<TrainedGp> {
+    let sod = train(data, m)?;
+    let n = data.targets.len();
+    if n <= m {
+        return Ok(sod);
+    }
+    let h = sod.hyper;
+    let (picked, residual) = greedy_inducing(&h, &data.inputs, m);
+    anyhow::ensure!(picked.len() == m, "only {} inducing inputs", picked.len());
+    let z: Vec<[f64; GP_INPUTS]> = picked.iter().map(|&i| data.inputs[i]).collect();
+    let mean = data.targets.iter().sum::<f64>() / n as f64;
+    let jitter = INDUCING_JITTER * h.signal_variance;
+    let kmm = DMatrix::from_fn(m, m, |i, j| {
+        h.kernel(&z[i], &z[j]) + if i == j { jitter } else { 0.0 }
+    });
+    let knm = DMatrix::from_fn(n, m, |i, j| h.kernel(&data.inputs[i], &z[j]));
+    let inv_noise =
+        DVector::from_iterator(n, residual.iter().map(|d| 1.0 / (h.noise_variance + d)));
+    let weighted = DMatrix::from_fn(n, m, |i, j| knm[(i, j)] * inv_noise[i]);
+    let mut g = knm.transpose() * &weighted;
+    g = (&g + g.transpose()) * 0.5;
+    let y = DVector::from_iterator(n, data.targets.iter().map(|v| v - mean));
+    let a = &kmm + &g;
+    let alpha = a
+        .cholesky()
+        .ok_or_else(|| anyhow::anyhow!("FITC system is not positive definite"))?
+        .solve(&(weighted.transpose() * &y));
+    let g_chol = (&g + DMatrix::identity(m, m) * (1e-12 * g.trace() / m as f64))
+        .cholesky()
+        .ok_or_else(|| anyhow::anyhow!("FITC data term is not positive definite"))?;
+    let mut c = &kmm + &kmm * g_chol.solve(&kmm);
+    c = (&c + c.transpose()) * 0.5;
+    let l = c
+        .cholesky()
+        .ok_or_else(|| anyhow::anyhow!("FITC variance matrix is not positive definite"))?
+        .l();
+    Ok(TrainedGp {
+        hyper: h,
+        targets: picked.iter().map(|&i| data.targets[i]).collect(),
+        inputs: z,
+        mean_offset: mean,
+        alpha: alpha.iter().copied().collect(),
+        chol_lower: (0..m)
+            .map(|i| (0..m).map(|j| l[(i, j)]).collect())
+            .collect(),
+        nlml: sod.nlml,
+    })
+}
+
 impl TrainedGp {
     /// The core predictor (exactly `M` stored points required), boxed: it is large.
     pub fn to_core<const M: usize>(
@@ -369,7 +501,8 @@ impl TrainedGp {
     }
 
     /// Mean and latent variance by the textbook dense formulas with an explicit inverse of
-    /// `K + sigma_n^2 I` (an independent check of the core predictor).
+    /// `K + sigma_n^2 I` (an independent check of the core predictor; for a GP of [`train`],
+    /// not of [`train_sparse`]).
     pub fn predict_dense(&self, x: &[f64; GP_INPUTS]) -> (f64, f64) {
         let k = gram(&self.hyper, &self.inputs);
         let kinv = k.try_inverse().unwrap_or_else(|| DMatrix::zeros(1, 1));
