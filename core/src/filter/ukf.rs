@@ -168,6 +168,16 @@ impl<T: Real, const NX: usize, const NS: usize> Ukf<T, NX, NS> {
         self.propagated = false;
         Ok(())
     }
+    /// Replaces state and covariance together (e.g. an IMM's mixing); an invalid pair is an
+    /// error and changes neither.
+    pub fn set_estimate(&mut self, x: SVector<T, NX>, p: SMatrix<T, NX, NX>) -> Result<(), Error> {
+        if !all_finite(x.as_slice()) {
+            return Err(Error::InvalidParameter("x"));
+        }
+        self.set_covariance(p)?;
+        self.x = x;
+        Ok(())
+    }
     /// Sets the NIS gate (reject measurements whose NIS exceeds it).
     pub fn set_gate(&mut self, gate: T) {
         self.gate = if gate > T::zero() {

@@ -347,11 +347,7 @@ impl<T: Real, const NX: usize, const NU: usize, const D: usize, const M: usize, 
         *self.ukf.covariance()
     }
     fn reinitialise(&mut self, x: &SVector<T, NX>, p: &SMatrix<T, NX, NX>) -> Result<(), Error> {
-        let mut ukf = self.ukf.clone();
-        ukf.set_state(*x)?;
-        ukf.set_covariance(*p)?;
-        self.ukf = ukf;
-        Ok(())
+        self.ukf.set_estimate(*x, *p)
     }
     fn filter_step(&mut self, input: &SVector<T, NU>, z: &[T]) -> Result<ModeUpdate<T>, Error> {
         self.step(input, z).map(|r| ModeUpdate {
