@@ -693,7 +693,7 @@ impl<'a> Problem<'a> {
     }
 
     /// Coordinate `i`: a `grid`-point grid over its range, then `golden` golden-section
-    /// steps in the bracket around the best grid point.
+    /// steps in the bracket around the best grid point (see [`grid_then_golden`]).
     fn line_search(
         &self,
         components: &[Component],
@@ -709,44 +709,81 @@ impl<'a> Problem<'a> {
             probe[i] = to_value(d, u);
             self.cost_at(components, dims, &probe)
         };
-        let costs: Vec<f64> = (0..grid)
-            .map(|g| eval(g as f64 / (grid - 1) as f64))
-            .collect();
-        let (g_best, &c_best) = costs
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.total_cmp(b.1))
-            .unwrap_or((0, &f64::INFINITY));
-        let step = 1.0 / (grid - 1) as f64;
-        let mut a = (g_best as f64 - 1.0).max(0.0) * step;
-        let mut b = (g_best as f64 + 1.0).min((grid - 1) as f64) * step;
-        let ratio = 0.5 * (5f64.sqrt() - 1.0);
-        let mut x1 = b - ratio * (b - a);
-        let mut x2 = a + ratio * (b - a);
-        let mut f1 = eval(x1);
-        let mut f2 = eval(x2);
-        for _ in 0..golden {
-            if f1 <= f2 {
-                b = x2;
-                x2 = x1;
-                f2 = f1;
-                x1 = b - ratio * (b - a);
-                f1 = eval(x1);
-            } else {
-                a = x1;
-                x1 = x2;
-                f1 = f2;
-                x2 = a + ratio * (b - a);
-                f2 = eval(x2);
+        let (u, c) = grid_then_golden(&mut eval, 0.0, 1.0, grid, golden, true);
+        (to_value(d, u), c)
+    }
+}
+
+/// Minimises `eval` over `[lo, hi]`: a `grid`-point grid, then `golden` golden-section
+/// steps in the bracket around the best grid point. When the best cost is shared by
+/// several grid points (a plateau: a range of the parameter that changes nothing, such as
+/// a critical ratio below every ratio the orifices see), the minimum can hide between the
+/// plateau's edge and the next grid point; with `edges` those brackets are searched the
+/// same way. Returns the best point and its cost.
+fn grid_then_golden(
+    eval: &mut dyn FnMut(f64) -> f64,
+    lo: f64,
+    hi: f64,
+    grid: usize,
+    golden: usize,
+    edges: bool,
+) -> (f64, f64) {
+    let grid = grid.max(2);
+    let step = (hi - lo) / (grid - 1) as f64;
+    let at = |g: usize| lo + g as f64 * step;
+    let costs: Vec<f64> = (0..grid).map(|g| eval(at(g))).collect();
+    let (g_best, c_best) = costs
+        .iter()
+        .copied()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, f64::INFINITY));
+    let tied = |g: usize| (costs[g] - c_best).abs() <= 1e-12 * c_best.abs().max(1e-300);
+    let (mut p0, mut p1) = (g_best, g_best);
+    while p0 > 0 && tied(p0 - 1) {
+        p0 -= 1;
+    }
+    while p1 + 1 < grid && tied(p1 + 1) {
+        p1 += 1;
+    }
+    let mut best = (at(g_best), c_best);
+    if edges && p1 > p0 && c_best.is_finite() {
+        let brackets = [
+            (p1 + 1 < grid).then(|| (at(p1), at(p1 + 1))),
+            (p0 > 0).then(|| (at(p0 - 1), at(p0))),
+        ];
+        for (a, b) in brackets.into_iter().flatten() {
+            let found = grid_then_golden(eval, a, b, golden.max(3), golden, false);
+            if found.1 < best.1 {
+                best = found;
             }
         }
-        let (u, c) = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
-        if c < c_best {
-            (to_value(d, u), c)
+        return best;
+    }
+    let mut a = at(g_best.saturating_sub(1));
+    let mut b = at((g_best + 1).min(grid - 1));
+    let ratio = 0.5 * (5f64.sqrt() - 1.0);
+    let mut x1 = b - ratio * (b - a);
+    let mut x2 = a + ratio * (b - a);
+    let mut f1 = eval(x1);
+    let mut f2 = eval(x2);
+    for _ in 0..golden {
+        if f1 <= f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - ratio * (b - a);
+            f1 = eval(x1);
         } else {
-            (to_value(d, g_best as f64 * step), c_best)
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + ratio * (b - a);
+            f2 = eval(x2);
         }
     }
+    let (u, c) = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
+    if c < best.1 { (u, c) } else { best }
 }
 
 /// The step of the lattice a quantised channel's values lie on: the smallest nonzero
