@@ -242,7 +242,11 @@ fn gap_finds_choked_flow_when_the_model_never_chokes() {
     // The bench's valve model lacks choking (`critical_pressure_ratio = 0` in every valve
     // meta file); this truth's orifices choke below a critical ratio set for ratio 4.
     let d = one("valve", "choked_flow", 4.0);
-    assert!(d.meta.contains("critical_pressure_ratio = 0.0"), "{}", d.meta);
+    assert!(
+        d.meta.contains("critical_pressure_ratio = 0.0"),
+        "{}",
+        d.meta
+    );
     let o = run_one(&d).unwrap();
     assert_eq!(o.verdict, "choked_flow", "top 3: {:?}", o.top3);
     assert_eq!(Some(o.channel.as_str()), d.label.channel.as_deref());

@@ -1693,14 +1693,23 @@ mod tests {
         for i in 0..=200 {
             let down = up * f64::from(i) / 200.0;
             // At the isentropic critical ratio: the paper's law to rounding.
-            let (a, b) = (iso.gas_flow(up, down, 0.62, 1e-5), star.gas_flow(up, down, 0.62, 1e-5));
-            assert!((a - b).abs() <= 1e-12 * a.abs().max(1e-300), "{i}: {a} vs {b}");
+            let (a, b) = (
+                iso.gas_flow(up, down, 0.62, 1e-5),
+                star.gas_flow(up, down, 0.62, 1e-5),
+            );
+            assert!(
+                (a - b).abs() <= 1e-12 * a.abs().max(1e-300),
+                "{i}: {a} vs {b}"
+            );
             // Never choking: the non-choked law at every ratio (zero flow into vacuum).
             let r = down / up;
             let x = r.powf(1.0 / iso.gamma);
             let unchoked = 0.62 * 1e-5 * up * (gc.subsonic * (x * (x - r)).max(0.0)).sqrt();
             let n = never.gas_flow(up, down, 0.62, 1e-5);
-            assert!((n - unchoked).abs() <= 1e-12 * unchoked.max(1e-300), "{i}: {n} vs {unchoked}");
+            assert!(
+                (n - unchoked).abs() <= 1e-12 * unchoked.max(1e-300),
+                "{i}: {n} vs {unchoked}"
+            );
         }
         // Without choking far less gas passes a 50:1 pressure ratio; a real orifice's
         // critical ratio (0.3) lies between, continuous at it.
@@ -1714,10 +1723,16 @@ mod tests {
         assert!((below - above).abs() < 1e-6 * above, "{below} {above}");
         assert!(real.gas_flow(up, 1e5, 0.62, 1e-5) == below && below < full);
         // The f32 conversion keeps the law; a bad ratio is no choking, not a panic.
-        assert_eq!(real.cast_to::<f32>().choking, Choking::CriticalRatio(0.3f32));
+        assert_eq!(
+            real.cast_to::<f32>().choking,
+            Choking::CriticalRatio(0.3f32)
+        );
         for bad in [f64::NAN, -1.0, 1.0, 2.0] {
             let f = at(bad).gas_flow(up, 1e5, 0.62, 1e-5);
-            assert!((f - never.gas_flow(up, 1e5, 0.62, 1e-5)).abs() < 1e-15, "{bad}: {f}");
+            assert!(
+                (f - never.gas_flow(up, 1e5, 0.62, 1e-5)).abs() < 1e-15,
+                "{bad}: {f}"
+            );
         }
     }
 

@@ -1245,7 +1245,11 @@ pub fn score(outcomes: &[Outcome], keep: impl Fn(f64) -> bool) -> Scores {
         mean_confusable: if singles.is_empty() {
             f64::NAN
         } else {
-            singles.iter().map(|o| o.confusable.len() as f64).sum::<f64>() / singles.len() as f64
+            singles
+                .iter()
+                .map(|o| o.confusable.len() as f64)
+                .sum::<f64>()
+                / singles.len() as f64
         },
         localisation: frac(&singles, Outcome::localised),
         median_shrink: crate::gap::stats::median(&shrinks).unwrap_or(f64::NAN),
