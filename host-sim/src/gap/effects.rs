@@ -818,11 +818,25 @@ pub fn lattice_step(y: &[f64]) -> Option<f64> {
 /// batch sums are nearly independent.
 pub const HELD_OUT_BATCHES: usize = 20;
 
-/// How clearly the held-out data prefer `a` to `b`: their score difference divided by its
-/// standard error, estimated from the spread of the per-batch log-likelihood differences
-/// (a batch-means form of Vuong's test for non-nested models). Infinite when every batch
-/// agrees exactly; NaN without batches.
+/// How clearly the held-out data prefer `a` to `b`, in standard errors of their score
+/// difference `D`: the larger of two estimates. (1) Measurement noise alone: with Gaussian
+/// residuals and `a` right, `D` is `sum delta^2 / 2 sigma^2` over the predictions'
+/// difference `delta` with variance twice that, so `z = sqrt(D / 2)`. (2) The spread of the
+/// per-batch log-likelihood differences (a batch-means form of Vuong's test for non-nested
+/// models), which also covers model error; alone it cannot exceed 1 when all the evidence
+/// sits in one batch (a single transient), hence (1). NaN without batches.
 pub fn separation(a: &Evaluation, b: &Evaluation) -> f64 {
+    let diff = a.absolute_score - b.absolute_score;
+    let by_noise = if diff > 0.0 { (0.5 * diff).sqrt() } else { 0.0 };
+    let by_batches = batch_separation(a, b);
+    if by_batches.is_nan() {
+        by_batches
+    } else {
+        by_batches.max(by_noise)
+    }
+}
+
+fn batch_separation(a: &Evaluation, b: &Evaluation) -> f64 {
     let d: Vec<f64> = a
         .batch_ll
         .iter()
