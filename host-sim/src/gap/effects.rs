@@ -928,6 +928,61 @@ mod tests {
     }
 
     #[test]
+    fn line_search_finds_a_sharp_minimum_beside_a_plateau() {
+        // Flat (no effect) up to 0.42, a narrow valley at 0.43, rising after: no grid point
+        // of 13 lies in the valley; the plateau's edge bracket holds it.
+        let mut f = |u: f64| {
+            if u < 0.42 {
+                100.0
+            } else {
+                100.0 - 50.0 * (-((u - 0.43) / 0.004).powi(2)).exp() + 400.0 * (u - 0.42)
+            }
+        };
+        let (u, c) = grid_then_golden(&mut f, 0.0, 1.0, 13, 16, true);
+        assert!((u - 0.43).abs() < 2e-3 && c < 60.0, "{u} {c}");
+        let (u, c) = grid_then_golden(&mut f, 0.0, 1.0, 13, 16, false);
+        assert!(
+            c >= 100.0 - 1e-9,
+            "without the edge search the valley is missed: {u} {c}"
+        );
+    }
+
+    #[test]
+    fn separation_counts_noise_and_batch_spread() {
+        let eval = |score: f64, batches: Vec<f64>| Evaluation {
+            effect: String::new(),
+            components: Vec::new(),
+            params: Vec::new(),
+            score,
+            gap_before: 0.0,
+            gap_after: 0.0,
+            shrink: 0.0,
+            truth_error_before: None,
+            truth_error_after: None,
+            train_cost: 0.0,
+            absolute_score: score,
+            batch_ll: batches,
+            fitted: Vec::new(),
+        };
+        // All 50 nats of evidence in one batch: the batch spread alone says z = 1, the
+        // noise says sqrt(25) = 5.
+        let mut one = vec![0.0; HELD_OUT_BATCHES];
+        one[3] = 50.0;
+        let (a, b) = (eval(50.0, one), eval(0.0, vec![0.0; HELD_OUT_BATCHES]));
+        assert!((separation(&a, &b) - 5.0).abs() < 1e-12);
+        // Spread evenly and consistently: the batches separate them far more clearly.
+        let even: Vec<f64> = (0..HELD_OUT_BATCHES)
+            .map(|i| 2.5 + 0.01 * i as f64)
+            .collect();
+        let total: f64 = even.iter().sum();
+        let c = eval(total, even);
+        assert!(separation(&c, &b) > 50.0);
+        // Equal candidates are not separated; the worse one has z <= 0.
+        assert_eq!(separation(&b, &b), 0.0);
+        assert!(separation(&b, &a) <= 0.0);
+    }
+
+    #[test]
     fn quantised_mean_is_the_staircase_without_noise_and_smooth_with_it() {
         assert_eq!(quantised_mean(0.7, 1.0, 0.0), 1.0);
         // Noise of two steps dithers the quantiser: the mean reading is the input.
