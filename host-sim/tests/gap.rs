@@ -236,3 +236,76 @@ fn small_gap_bench_attributes_localises_and_rejects() {
     assert!(sc.median_shrink > 0.8, "{}", sc.median_shrink);
     assert_eq!(sc.false_attribution, 0.0, "{outcomes:#?}");
 }
+
+#[test]
+fn gap_finds_choked_flow_when_the_model_never_chokes() {
+    // The bench's valve model lacks choking (`critical_pressure_ratio = 0` in every valve
+    // meta file); this truth's orifices choke below a critical ratio set for ratio 4.
+    let d = one("valve", "choked_flow", 4.0);
+    assert!(
+        d.meta.contains("critical_pressure_ratio = 0.0"),
+        "{}",
+        d.meta
+    );
+    let o = run_one(&d).unwrap();
+    assert_eq!(o.verdict, "choked_flow", "top 3: {:?}", o.top3);
+    assert_eq!(Some(o.channel.as_str()), d.label.channel.as_deref());
+    assert!(o.shrink > 0.8, "shrink {}", o.shrink);
+}
+
+#[test]
+fn gap_recovers_the_isentropic_critical_ratio_from_progpy_data() {
+    // progpy's valve chokes as an isentropic nozzle. Told that its orifices never choke,
+    // our model is off; `choked_flow` explains it with b = (2 / 2.4)^3.5 = 0.528. Told
+    // nothing, the model chokes already and `choked_flow` is no candidate.
+    let data = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/progpy-valve/nominal_leak_free_dt0.01.csv");
+    let dir = scratch("choked");
+    let told = |name: &str, model: &str| {
+        let meta = dir.join(format!("{name}.meta.toml"));
+        std::fs::write(
+            &meta,
+            format!(
+                "plant = \"valve\"\ndt = 0.01\n[model]\nprogpy_euler = 1\n{model}[noise]\n\
+                 \"y:x\" = 1.0e-4\n\"y:pt\" = 5.0e3\n\"y:pb\" = 5.0e3\n\"y:q\" = 5.0e-3\n"
+            ),
+        )
+        .unwrap();
+        let out = dir.join(name);
+        let o = prognos(&[
+            "gap",
+            "--data",
+            s(&data),
+            "--meta",
+            s(&meta),
+            "--out",
+            s(&out),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = std::fs::read_to_string(out.join("verdict.json")).unwrap();
+        serde_json::from_str::<serde_json::Value>(&text).unwrap()
+    };
+    let v = told("unchoked", "critical_pressure_ratio = 0\n");
+    assert_eq!(v["verdict"], "choked_flow", "{:#}", v["ranking"][0]);
+    let top = &v["ranking"][0];
+    assert_eq!(top["params"][0][0], "critical_pressure_ratio");
+    let b = top["params"][0][1].as_f64().unwrap();
+    assert!((b / 0.528_281_8 - 1.0).abs() < 0.02, "b = {b}");
+    assert!(top["shrink"].as_f64().unwrap() > 0.9, "{top:#}");
+    let v = told("default", "");
+    assert_eq!(v["verdict"], "none");
+    assert!(
+        v["ranking"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|e| e["effect"] != "choked_flow")
+    );
+    assert!(
+        v["sim_effects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|e| e == "choked_flow")
+    );
+}

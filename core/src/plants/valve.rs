@@ -115,6 +115,21 @@ pub enum Integrator {
     ProgpyEuler,
 }
 
+/// How the orifices choke (the gas law of the supply, vent and leak orifices).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Choking<T> {
+    /// The paper's f_g: an isentropic nozzle, choked once the downstream/upstream pressure
+    /// ratio falls below `(2 / (gamma + 1))^(gamma / (gamma - 1))` (0.528 for gamma = 1.4).
+    Isentropic,
+    /// Choked below the downstream/upstream pressure ratio `b` (ISO 6358's critical pressure
+    /// ratio of a real orifice): below it the mass flow stays at the non-choked law's value
+    /// at `b`, so the flow is continuous. `b` outside (0, 1) (0 in particular): the orifice
+    /// never chokes, the non-choked law holds at every ratio. `b` at the isentropic value is
+    /// [`Choking::Isentropic`] to rounding.
+    CriticalRatio(T),
+}
+
 /// Which sensors the filter sees (the paper's measurement sets `M`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -205,6 +220,8 @@ pub struct ValveParams<T> {
     pub c_leak: T,
     /// End-of-stroke model.
     pub contact: Contact<T>,
+    /// Orifice choking (all presets: [`Choking::Isentropic`]).
+    pub choking: Choking<T>,
     /// The discrete sensors switch within this distance of the stops [m] (paper 0, progpy 1 mm).
     pub indicator_tolerance: T,
     /// Time-stepping scheme.
@@ -246,6 +263,7 @@ impl<T: Real> ValveParams<T> {
             c_s: cast(0.62),
             c_leak: cast(0.62),
             contact: Contact::Seal { k_c: cast(1.0e9) },
+            choking: Choking::Isentropic,
             indicator_tolerance: T::zero(),
             integrator: Integrator::SemiImplicit,
             max_substep: cast(0.01),
@@ -280,6 +298,7 @@ impl<T: Real> ValveParams<T> {
             c_s: cast(0.62),
             c_leak: cast(1.0),
             contact: Contact::HardStops,
+            choking: Choking::Isentropic,
             indicator_tolerance: cast(1.0e-3),
             integrator: Integrator::ProgpyEuler,
             max_substep: cast(0.01),
@@ -326,6 +345,10 @@ impl<T: Real> ValveParams<T> {
                 Contact::Seal { k_c } => Contact::Seal { k_c: c(k_c) },
                 Contact::HardStops => Contact::HardStops,
             },
+            choking: match self.choking {
+                Choking::Isentropic => Choking::Isentropic,
+                Choking::CriticalRatio(b) => Choking::CriticalRatio(c(b)),
+            },
             indicator_tolerance: c(self.indicator_tolerance),
             integrator: self.integrator,
             max_substep: c(self.max_substep),
@@ -368,14 +391,18 @@ impl<T: Real> ValveParams<T> {
         GasCoefficients::new(self.gamma, self.z * self.r_gas * self.temperature)
     }
 
-    /// The gas-only constants of the orifice equation (the cached ones when `gamma`, `z`,
-    /// `r_gas` and `temperature` are still those they were computed from).
+    /// The constants of the orifice equation (the cached ones when `gamma`, `z`, `r_gas`
+    /// and `temperature` are still those they were computed from), for [`ValveParams::choking`].
     pub fn gas_coefficients(&self) -> GasCoefficients<T> {
         let zrt = self.z * self.r_gas * self.temperature;
-        if self.gas_cache.gamma == self.gamma && self.gas_cache.zrt == zrt {
+        let isentropic = if self.gas_cache.gamma == self.gamma && self.gas_cache.zrt == zrt {
             self.gas_cache
         } else {
             GasCoefficients::new(self.gamma, zrt)
+        };
+        match self.choking {
+            Choking::Isentropic => isentropic,
+            Choking::CriticalRatio(b) => isentropic.choking_at(b),
         }
     }
 
@@ -715,6 +742,30 @@ impl<T: Real> GasCoefficients<T> {
             subsonic: two * g / (zrt * (g - one)),
             inv_gamma: one / g,
             series: binomial_series(one / g),
+        }
+    }
+
+    /// These constants with the orifice choking below the downstream/upstream ratio `b`
+    /// (see [`Choking::CriticalRatio`]): the choked flow is the non-choked law's at `b`;
+    /// outside (0, 1) the orifice never chokes.
+    pub fn choking_at(self, b: T) -> Self {
+        let zero = T::zero();
+        if !(b > zero && b < T::one()) {
+            // The choked branch is then reached only at a zero downstream pressure, where
+            // the non-choked law gives no flow either.
+            return Self {
+                choke_ratio: T::MAX_FINITE,
+                choked: zero,
+                ..self
+            };
+        }
+        let a = b.powf(self.inv_gamma);
+        let bracket = a * (a - b);
+        let bracket = if bracket > zero { bracket } else { zero };
+        Self {
+            choke_ratio: T::one() / b,
+            choked: (self.subsonic * bracket).sqrt(),
+            ..self
         }
     }
 }
@@ -1626,6 +1677,63 @@ mod tests {
         let above = p.gas_flow(ratio * 1e5 * (1.0 + 1e-9), 1e5, 1.0, 1e-5);
         assert!((below - above).abs() / above < 1e-6, "{below} {above}");
         assert_eq!(p.gas_flow(2e5, 2e5, 1.0, 1e-5), 0.0);
+    }
+
+    #[test]
+    fn critical_ratio_choking_nests_the_isentropic_and_the_unchoked_laws() {
+        let iso = ValveParams::<f64>::progpy();
+        let gc = iso.gas_coefficients();
+        let b_star = 1.0 / gc.choke_ratio;
+        let at = |b: f64| ValveParams {
+            choking: Choking::CriticalRatio(b),
+            ..iso
+        };
+        let (star, never) = (at(b_star), at(0.0));
+        let up = 5.0e6;
+        for i in 0..=200 {
+            let down = up * f64::from(i) / 200.0;
+            // At the isentropic critical ratio: the paper's law to rounding.
+            let (a, b) = (
+                iso.gas_flow(up, down, 0.62, 1e-5),
+                star.gas_flow(up, down, 0.62, 1e-5),
+            );
+            assert!(
+                (a - b).abs() <= 1e-12 * a.abs().max(1e-300),
+                "{i}: {a} vs {b}"
+            );
+            // Never choking: the non-choked law at every ratio (zero flow into vacuum).
+            let r = down / up;
+            let x = r.powf(1.0 / iso.gamma);
+            let unchoked = 0.62 * 1e-5 * up * (gc.subsonic * (x * (x - r)).max(0.0)).sqrt();
+            let n = never.gas_flow(up, down, 0.62, 1e-5);
+            assert!(
+                (n - unchoked).abs() <= 1e-12 * unchoked.max(1e-300),
+                "{i}: {n} vs {unchoked}"
+            );
+        }
+        // Without choking far less gas passes a 50:1 pressure ratio; a real orifice's
+        // critical ratio (0.3) lies between, continuous at it.
+        let full = iso.gas_flow(up, 1e5, 0.62, 1e-5);
+        assert!(never.gas_flow(up, 1e5, 0.62, 1e-5) < 0.25 * full);
+        let real = at(0.3);
+        let (below, above) = (
+            real.gas_flow(up, 0.3 * up * (1.0 - 1e-9), 0.62, 1e-5),
+            real.gas_flow(up, 0.3 * up * (1.0 + 1e-9), 0.62, 1e-5),
+        );
+        assert!((below - above).abs() < 1e-6 * above, "{below} {above}");
+        assert!(real.gas_flow(up, 1e5, 0.62, 1e-5) == below && below < full);
+        // The f32 conversion keeps the law; a bad ratio is no choking, not a panic.
+        assert_eq!(
+            real.cast_to::<f32>().choking,
+            Choking::CriticalRatio(0.3f32)
+        );
+        for bad in [f64::NAN, -1.0, 1.0, 2.0] {
+            let f = at(bad).gas_flow(up, 1e5, 0.62, 1e-5);
+            assert!(
+                (f - never.gas_flow(up, 1e5, 0.62, 1e-5)).abs() < 1e-15,
+                "{bad}: {f}"
+            );
+        }
     }
 
     #[test]

@@ -25,6 +25,20 @@ pub const EXPLAIN_SHRINK: f64 = 0.7;
 pub const PAIR_TRIGGER: f64 = 0.8;
 /// How many of the best forward pairs are refined jointly.
 pub const PAIR_POOL: usize = 4;
+/// A candidate the held-out data do not prefer the verdict to by at least this many
+/// standard errors ([`crate::gap::effects::separation`]) is reported as confusable with it.
+pub const SEPARATION_Z: f64 = 2.0;
+
+/// A candidate the data cannot tell from the verdict.
+#[derive(Clone, Debug, Serialize)]
+pub struct Confusable {
+    /// Effect name.
+    pub effect: String,
+    /// The verdict's score minus this one's (nats).
+    pub score_gap: f64,
+    /// That difference in standard errors (batch means over the held-out blocks).
+    pub z: f64,
+}
 
 /// How a channel's noise level was obtained.
 #[derive(Clone, Debug, Serialize)]
@@ -67,6 +81,9 @@ pub struct Diagnosis {
     /// Pairs of the best single effects, fitted jointly when no single one explains the
     /// gap (best score first; empty otherwise).
     pub pairs: Vec<Evaluation>,
+    /// Candidates within [`SEPARATION_Z`] standard errors of the verdict's held-out
+    /// score: the data do not separate them from it (empty for `none` and `unknown`).
+    pub confusable: Vec<Confusable>,
     /// Noise levels used.
     pub noise: Vec<NoiseLevel>,
     /// Effects the user's model already had.
@@ -159,6 +176,11 @@ pub fn diagnose_with(
             ));
         }
         sim_effects.push(e.value.clone());
+    }
+    for e in plant.model_effects(&base) {
+        if !sim_effects.iter().any(|s| s == e) {
+            sim_effects.push(e.to_string());
+        }
     }
     let header = &recording.series.header;
     for (name, located) in meta
@@ -333,17 +355,16 @@ pub fn diagnose_with(
             report.location.channel = format!("y:{channel}");
         }
     }
-    let overlays = overlays(
-        &problem,
-        &report,
-        ranking.iter().chain(&pairs).find(|e| e.effect == verdict),
-    );
+    let chosen = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
+    let confusable = chosen.map_or_else(Vec::new, |v| confusable_with(v, &ranking, &pairs));
+    let overlays = overlays(&problem, &report, chosen);
     Ok(Diagnosis {
         plant: plant.name().to_string(),
         verdict,
         location: report.location.clone(),
         ranking,
         pairs,
+        confusable,
         noise,
         sim_effects,
         samples: [
@@ -356,6 +377,31 @@ pub fn diagnose_with(
         spectrum: report.spectrum.clone(),
         overlays,
     })
+}
+
+/// The candidates (single and pairs) that the held-out data do not separate from the
+/// verdict `chosen`, least separated first.
+fn confusable_with(
+    chosen: &Evaluation,
+    ranking: &[Evaluation],
+    pairs: &[Evaluation],
+) -> Vec<Confusable> {
+    let mut out: Vec<Confusable> = ranking
+        .iter()
+        .chain(pairs)
+        .filter(|e| e.effect != chosen.effect)
+        .filter_map(|e| {
+            let z = crate::gap::effects::separation(chosen, e);
+            (z < SEPARATION_Z).then(|| Confusable {
+                effect: e.effect.clone(),
+                score_gap: chosen.score - e.score,
+                z,
+            })
+        })
+        .collect();
+    out.sort_by(|a, b| a.z.total_cmp(&b.z));
+    out.dedup_by(|a, b| a.effect == b.effect);
+    out
 }
 
 /// The channel of a single generic verdict (`kind:channel`), if it is one of `outputs`.
@@ -410,6 +456,9 @@ impl GapPlant for SelectPlant<'_> {
     }
     fn initial_window(&self) -> f64 {
         self.inner.initial_window()
+    }
+    fn model_effects(&self, params: &crate::gap::plant::Params) -> Vec<&'static str> {
+        self.inner.model_effects(params)
     }
     fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<crate::gap::plant::Regime> {
         // The plant's regime rules expect all its outputs: rebuild a full-width replay

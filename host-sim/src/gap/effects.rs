@@ -285,6 +285,10 @@ pub struct Evaluation {
     /// Raw held-out log-likelihood minus penalty (for pair comparisons).
     #[serde(skip)]
     pub absolute_score: f64,
+    /// Held-out log-likelihood per batch of [`HELD_OUT_BATCHES`] (how well the held-out
+    /// data separate two candidates, see [`separation`]).
+    #[serde(skip)]
+    pub batch_ll: Vec<f64>,
     /// The components and fitted values, to replay the candidate.
     #[serde(skip)]
     pub fitted: Vec<(Component, Vec<f64>)>,
@@ -522,6 +526,37 @@ impl<'a> Problem<'a> {
         (3.0 * var.sqrt()).sqrt()
     }
 
+    /// The held-out log-likelihood of [`Problem::held_out_score`] (no penalty) split into
+    /// [`HELD_OUT_BATCHES`] runs of consecutive held-out samples.
+    pub fn held_out_batches(&self, sim: &Simulation) -> Vec<f64> {
+        let train = self.channel_rss(sim, &self.train);
+        let held: Vec<usize> = (0..self.test.len()).filter(|&k| self.test[k]).collect();
+        let mut out = vec![0.0; HELD_OUT_BATCHES];
+        for (c, ((y, m), s)) in self
+            .measured
+            .iter()
+            .zip(&sim.outputs)
+            .zip(&self.sigma)
+            .enumerate()
+        {
+            let (rss_tr, n_tr) = train[c];
+            let var = (rss_tr / n_tr.max(1) as f64).max(0.5 * s * s);
+            let norm = 0.5 * (std::f64::consts::TAU * var).ln();
+            for (i, &k) in held.iter().enumerate() {
+                if y[k].is_finite() {
+                    let r = y[k] - m[k];
+                    let ll = if r.is_finite() {
+                        -norm - 0.5 * r * r / var
+                    } else {
+                        f64::NEG_INFINITY
+                    };
+                    out[i * HELD_OUT_BATCHES / held.len().max(1)] += ll;
+                }
+            }
+        }
+        out
+    }
+
     /// Held-out Gaussian log-likelihood with per-channel variance from the training
     /// residuals, minus `k/2 ln n_train`.
     pub fn held_out_score(&self, sim: &Simulation, k: usize) -> f64 {
@@ -652,12 +687,13 @@ impl<'a> Problem<'a> {
             truth_error_after: self.truth_error(&sim),
             train_cost: best,
             absolute_score: absolute,
+            batch_ll: self.held_out_batches(&sim),
             fitted,
         })
     }
 
     /// Coordinate `i`: a `grid`-point grid over its range, then `golden` golden-section
-    /// steps in the bracket around the best grid point.
+    /// steps in the bracket around the best grid point (see [`grid_then_golden`]).
     fn line_search(
         &self,
         components: &[Component],
@@ -673,44 +709,81 @@ impl<'a> Problem<'a> {
             probe[i] = to_value(d, u);
             self.cost_at(components, dims, &probe)
         };
-        let costs: Vec<f64> = (0..grid)
-            .map(|g| eval(g as f64 / (grid - 1) as f64))
-            .collect();
-        let (g_best, &c_best) = costs
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.total_cmp(b.1))
-            .unwrap_or((0, &f64::INFINITY));
-        let step = 1.0 / (grid - 1) as f64;
-        let mut a = (g_best as f64 - 1.0).max(0.0) * step;
-        let mut b = (g_best as f64 + 1.0).min((grid - 1) as f64) * step;
-        let ratio = 0.5 * (5f64.sqrt() - 1.0);
-        let mut x1 = b - ratio * (b - a);
-        let mut x2 = a + ratio * (b - a);
-        let mut f1 = eval(x1);
-        let mut f2 = eval(x2);
-        for _ in 0..golden {
-            if f1 <= f2 {
-                b = x2;
-                x2 = x1;
-                f2 = f1;
-                x1 = b - ratio * (b - a);
-                f1 = eval(x1);
-            } else {
-                a = x1;
-                x1 = x2;
-                f1 = f2;
-                x2 = a + ratio * (b - a);
-                f2 = eval(x2);
+        let (u, c) = grid_then_golden(&mut eval, 0.0, 1.0, grid, golden, true);
+        (to_value(d, u), c)
+    }
+}
+
+/// Minimises `eval` over `[lo, hi]`: a `grid`-point grid, then `golden` golden-section
+/// steps in the bracket around the best grid point. When the best cost is shared by
+/// several grid points (a plateau: a range of the parameter that changes nothing, such as
+/// a critical ratio below every ratio the orifices see), the minimum can hide between the
+/// plateau's edge and the next grid point; with `edges` those brackets are searched the
+/// same way. Returns the best point and its cost.
+fn grid_then_golden(
+    eval: &mut dyn FnMut(f64) -> f64,
+    lo: f64,
+    hi: f64,
+    grid: usize,
+    golden: usize,
+    edges: bool,
+) -> (f64, f64) {
+    let grid = grid.max(2);
+    let step = (hi - lo) / (grid - 1) as f64;
+    let at = |g: usize| lo + g as f64 * step;
+    let costs: Vec<f64> = (0..grid).map(|g| eval(at(g))).collect();
+    let (g_best, c_best) = costs
+        .iter()
+        .copied()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, f64::INFINITY));
+    let tied = |g: usize| (costs[g] - c_best).abs() <= 1e-12 * c_best.abs().max(1e-300);
+    let (mut p0, mut p1) = (g_best, g_best);
+    while p0 > 0 && tied(p0 - 1) {
+        p0 -= 1;
+    }
+    while p1 + 1 < grid && tied(p1 + 1) {
+        p1 += 1;
+    }
+    let mut best = (at(g_best), c_best);
+    if edges && p1 > p0 && c_best.is_finite() {
+        let brackets = [
+            (p1 + 1 < grid).then(|| (at(p1), at(p1 + 1))),
+            (p0 > 0).then(|| (at(p0 - 1), at(p0))),
+        ];
+        for (a, b) in brackets.into_iter().flatten() {
+            let found = grid_then_golden(eval, a, b, golden.max(3), golden, false);
+            if found.1 < best.1 {
+                best = found;
             }
         }
-        let (u, c) = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
-        if c < c_best {
-            (to_value(d, u), c)
+        return best;
+    }
+    let mut a = at(g_best.saturating_sub(1));
+    let mut b = at((g_best + 1).min(grid - 1));
+    let ratio = 0.5 * (5f64.sqrt() - 1.0);
+    let mut x1 = b - ratio * (b - a);
+    let mut x2 = a + ratio * (b - a);
+    let mut f1 = eval(x1);
+    let mut f2 = eval(x2);
+    for _ in 0..golden {
+        if f1 <= f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - ratio * (b - a);
+            f1 = eval(x1);
         } else {
-            (to_value(d, g_best as f64 * step), c_best)
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + ratio * (b - a);
+            f2 = eval(x2);
         }
     }
+    let (u, c) = if f1 <= f2 { (x1, f1) } else { (x2, f2) };
+    if c < best.1 { (u, c) } else { best }
 }
 
 /// The step of the lattice a quantised channel's values lie on: the smallest nonzero
@@ -738,6 +811,53 @@ pub fn lattice_step(y: &[f64]) -> Option<f64> {
         })
         .count();
     (on_lattice as f64 >= 0.9 * diffs.len() as f64).then_some(q)
+}
+
+/// Batches of consecutive held-out samples for [`separation`]: each spans a twentieth of
+/// the held-out data, far longer than the residuals' correlation in the built-in plants, so
+/// batch sums are nearly independent.
+pub const HELD_OUT_BATCHES: usize = 20;
+
+/// How clearly the held-out data prefer `a` to `b`, in standard errors of their score
+/// difference `D`: the larger of two estimates. (1) Measurement noise alone: with Gaussian
+/// residuals and `a` right, `D` is `sum delta^2 / 2 sigma^2` over the predictions'
+/// difference `delta` with variance twice that, so `z = sqrt(D / 2)`. (2) The spread of the
+/// per-batch log-likelihood differences (a batch-means form of Vuong's test for non-nested
+/// models), which also covers model error; alone it cannot exceed 1 when all the evidence
+/// sits in one batch (a single transient), hence (1). NaN without batches.
+pub fn separation(a: &Evaluation, b: &Evaluation) -> f64 {
+    let diff = a.absolute_score - b.absolute_score;
+    let by_noise = if diff > 0.0 { (0.5 * diff).sqrt() } else { 0.0 };
+    let by_batches = batch_separation(a, b);
+    if by_batches.is_nan() {
+        by_batches
+    } else {
+        by_batches.max(by_noise)
+    }
+}
+
+fn batch_separation(a: &Evaluation, b: &Evaluation) -> f64 {
+    let d: Vec<f64> = a
+        .batch_ll
+        .iter()
+        .zip(&b.batch_ll)
+        .map(|(x, y)| x - y)
+        .collect();
+    let n = d.len();
+    if n < 2 {
+        return f64::NAN;
+    }
+    let mean = d.iter().sum::<f64>() / n as f64;
+    let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let se = (n as f64 * var).sqrt();
+    let diff = a.absolute_score - b.absolute_score;
+    if se > 0.0 {
+        diff / se
+    } else if diff == 0.0 {
+        0.0
+    } else {
+        diff.signum() * f64::INFINITY
+    }
 }
 
 /// Maps `u` in [0, 1] to the parameter's range.
@@ -805,6 +925,61 @@ mod tests {
             assert_eq!(GenericKind::from_name(k.name()), Some(k));
             assert_eq!(k.param_names().len(), k.ranges(1.0, 1.0, 0.1, 0.1).len());
         }
+    }
+
+    #[test]
+    fn line_search_finds_a_sharp_minimum_beside_a_plateau() {
+        // Flat (no effect) up to 0.42, a narrow valley at 0.43, rising after: no grid point
+        // of 13 lies in the valley; the plateau's edge bracket holds it.
+        let mut f = |u: f64| {
+            if u < 0.42 {
+                100.0
+            } else {
+                100.0 - 50.0 * (-((u - 0.43) / 0.004).powi(2)).exp() + 400.0 * (u - 0.42)
+            }
+        };
+        let (u, c) = grid_then_golden(&mut f, 0.0, 1.0, 13, 16, true);
+        assert!((u - 0.43).abs() < 2e-3 && c < 60.0, "{u} {c}");
+        let (u, c) = grid_then_golden(&mut f, 0.0, 1.0, 13, 16, false);
+        assert!(
+            c >= 100.0 - 1e-9,
+            "without the edge search the valley is missed: {u} {c}"
+        );
+    }
+
+    #[test]
+    fn separation_counts_noise_and_batch_spread() {
+        let eval = |score: f64, batches: Vec<f64>| Evaluation {
+            effect: String::new(),
+            components: Vec::new(),
+            params: Vec::new(),
+            score,
+            gap_before: 0.0,
+            gap_after: 0.0,
+            shrink: 0.0,
+            truth_error_before: None,
+            truth_error_after: None,
+            train_cost: 0.0,
+            absolute_score: score,
+            batch_ll: batches,
+            fitted: Vec::new(),
+        };
+        // All 50 nats of evidence in one batch: the batch spread alone says z = 1, the
+        // noise says sqrt(25) = 5.
+        let mut one = vec![0.0; HELD_OUT_BATCHES];
+        one[3] = 50.0;
+        let (a, b) = (eval(50.0, one), eval(0.0, vec![0.0; HELD_OUT_BATCHES]));
+        assert!((separation(&a, &b) - 5.0).abs() < 1e-12);
+        // Spread evenly and consistently: the batches separate them far more clearly.
+        let even: Vec<f64> = (0..HELD_OUT_BATCHES)
+            .map(|i| 2.5 + 0.01 * i as f64)
+            .collect();
+        let total: f64 = even.iter().sum();
+        let c = eval(total, even);
+        assert!(separation(&c, &b) > 50.0);
+        // Equal candidates are not separated; the worse one has z <= 0.
+        assert_eq!(separation(&b, &b), 0.0);
+        assert!(separation(&b, &a) <= 0.0);
     }
 
     #[test]

@@ -290,6 +290,13 @@ pub trait GapPlant: Sync {
     /// Plant-specific operating regimes (the diagnoser adds generic quantile bins).
     fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime>;
 
+    /// Catalogue effects that a model with these parameters already has beside
+    /// `sim_effects` (the valve's orifices choke unless `[model]` says they never do);
+    /// they are no candidates.
+    fn model_effects(&self, _params: &Params) -> Vec<&'static str> {
+        Vec::new()
+    }
+
     /// Span (s) over which the initial condition is fitted from the first samples (see
     /// [`PlantData::first_output`]); 0 for plants whose initial error dies out in a few
     /// samples.

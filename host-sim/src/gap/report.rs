@@ -43,6 +43,16 @@ fn summary_lines(d: &Diagnosis) -> Vec<String> {
             l.statistic, l.p_value, l.significant
         ),
     ];
+    if !d.confusable.is_empty() {
+        out.push(format!(
+            "not separated from the verdict by the held-out data (score gap, standard errors): {}",
+            d.confusable
+                .iter()
+                .map(|c| format!("{} ({:.1} nats, {:.1})", c.effect, c.score_gap, c.z))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
     if let Some(t) = &l.strongest_test {
         out.push(format!(
             "strongest test: {} on {} ({}), statistic {:.3}, adjusted p = {:.3e}",

@@ -8,20 +8,39 @@
 //! are model parameters (`friction`, `spring`, the three leak areas), so the catalogue's
 //! effects are departures of those from the user's values: `friction_increase`,
 //! `spring_weakening`, `internal_leak`, `top_external_leak`, `bottom_external_leak`, and
-//! `seal_contact` (flexible seals of stiffness `seal_stiffness` instead of hard stops).
-//! `choked_flow` is not a candidate: the core's orifice equation always chokes, and a model
-//! without choking to start from does not exist in this project.
+//! `seal_contact` (flexible seals of stiffness `seal_stiffness` instead of hard stops), and
+//! `choked_flow`: the orifices choke below the critical pressure ratio
+//! `critical_pressure_ratio` (downstream/upstream, ISO 6358's `b`; the core's
+//! `Choking::CriticalRatio`). The project's model chokes isentropically (the default
+//! 0.5283, gamma = 1.4), so `choked_flow` is a candidate only for a user's model whose
+//! orifices never choke (`critical_pressure_ratio = 0` in `[model]`): the candidate adds the
+//! choked regime and fits `b`, which the isentropic nozzle puts at 0.528 and real orifices
+//! lower.
 
 use crate::gap::plant::{
     EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
 };
 use nalgebra::SVector;
-use prognos_core::plants::valve::{Contact, Integrator, NU, NX, ValveParams, idx};
+use prognos_core::plants::valve::{Choking, Contact, Integrator, NU, NX, ValveParams, idx};
 use std::collections::BTreeMap;
 
 /// The valve gap plant.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ValveGapPlant;
+
+/// The isentropic critical pressure ratio `(2 / (gamma + 1))^(gamma / (gamma - 1))` for
+/// gamma = 1.4: the default `critical_pressure_ratio`, which selects the core's
+/// [`Choking::Isentropic`] law exactly.
+pub const ISENTROPIC_CRITICAL_RATIO: f64 = 0.528_281_787_717_174_2;
+
+/// The orifice law for a `critical_pressure_ratio` of `b`.
+pub fn choking_for(b: f64) -> Choking<f64> {
+    if (b - ISENTROPIC_CRITICAL_RATIO).abs() < 1e-9 {
+        Choking::Isentropic
+    } else {
+        Choking::CriticalRatio(b)
+    }
+}
 
 /// Parameters with defaults (progpy's `PneumaticValveBase`, undamaged).
 pub const VALVE_PARAMETERS: &[ParamSpec] = &[
@@ -54,6 +73,12 @@ pub const VALVE_PARAMETERS: &[ParamSpec] = &[
         name: "seal_stiffness",
         default: 1.0e9,
         doc: "k_c (N/m) of the flexible seals, seal_contact",
+    },
+    ParamSpec {
+        name: "critical_pressure_ratio",
+        default: ISENTROPIC_CRITICAL_RATIO,
+        doc: "downstream/upstream pressure ratio below which the orifices choke (default: \
+              isentropic, 0.5283; 0: they never choke), choked_flow",
     },
     ParamSpec {
         name: "supply_pressure",
@@ -113,7 +138,22 @@ pub fn valve_effects() -> Vec<EffectSpec> {
             1e6,
             1e11,
         ),
+        EffectSpec::single(
+            "choked_flow",
+            "the orifices choke below a critical pressure ratio b (the model's never choke)",
+            "critical_pressure_ratio",
+            0.01,
+            0.95,
+            Scale::Log,
+        ),
     ]
+}
+
+/// Whether a model with these parameters already chokes (then `choked_flow` is no
+/// candidate).
+pub fn model_chokes(params: &Params) -> bool {
+    let b = param(params, "critical_pressure_ratio");
+    b > 0.0 && b < 1.0
 }
 
 /// What the bench's truth adds to a replay (all off by default): finer steps and two
@@ -162,6 +202,7 @@ pub fn simulate_valve(
     let mut vp = ValveParams::<f64>::progpy();
     vp.max_substep /= f64::from(extras.substep_factor.max(1));
     vp.p_supply = g("supply_pressure");
+    vp.choking = choking_for(g("critical_pressure_ratio"));
     vp.integrator = if g("progpy_euler") >= 0.5 {
         Integrator::ProgpyEuler
     } else {
@@ -246,6 +287,14 @@ impl GapPlant for ValveGapPlant {
 
     fn effects(&self) -> Vec<EffectSpec> {
         valve_effects()
+    }
+
+    fn model_effects(&self, params: &Params) -> Vec<&'static str> {
+        if model_chokes(params) {
+            vec!["choked_flow"]
+        } else {
+            Vec::new()
+        }
     }
 
     fn simulate(
