@@ -507,6 +507,16 @@ impl<const N: usize> BurstThermometer<N> {
         self.history = [self.history[1], Some((t, estimate))];
         estimate
     }
+
+    /// Posterior standard deviation of the temperature (degC) after the last burst: the
+    /// weighted spread of the particles.
+    pub fn posterior_std(&self) -> f64 {
+        self.filter
+            .filter()
+            .covariance()
+            .get((2, 2))
+            .map_or(0.0, |v| v.max(0.0).sqrt())
+    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -585,6 +595,12 @@ pub struct Step2Settings {
     pub temperature_std: f64,
     /// Random walk per interval of the Kalman filter's `[b (degC), ln beta]`.
     pub kalman_walk: (f64, f64),
+    /// The Kalman filter takes each burst's own posterior standard deviation, combined in
+    /// quadrature with `temperature_std`, as that interval's temperature error.
+    pub posterior_temperature_std: bool,
+    /// The Kalman filter compensates the errors-in-variables bias of `b`
+    /// ([`LossKalmanConfig::bias_compensation`]).
+    pub kalman_bias_compensation: bool,
 }
 
 impl Step2Settings {
@@ -601,6 +617,8 @@ impl Step2Settings {
             burn_in: 5,
             temperature_std: 0.05,
             kalman_walk: (0.02, 0.0005),
+            posterior_temperature_std: false,
+            kalman_bias_compensation: false,
         }
     }
 }
@@ -645,6 +663,9 @@ pub struct LossEstimators {
     joint: AdaptiveFilter<f64, 2, STEP2_PARTICLES>,
     joint_model: prognos_core::plants::reaction_wheel::LossJointModel<f64>,
     rng: Xoshiro256PlusPlus,
+    /// Only the Kalman filter runs (diagnosis of the loss side; the paper's filters keep
+    /// their priors).
+    pub kalman_only: bool,
 }
 
 fn adaptive_config<const NX: usize>(spread: SVector<f64, NX>) -> AdaptiveConfig<f64, NX> {
@@ -691,6 +712,7 @@ impl LossEstimators {
             .ok()?;
         let kalman_config = LossKalmanConfig {
             walk: Vector2::new(s.kalman_walk.0, s.kalman_walk.1),
+            bias_compensation: s.kalman_bias_compensation,
             ..LossKalmanConfig::new(s.relative_noise, s.temperature_std).ok()?
         };
         let kalman = LossKalman::new(
@@ -709,6 +731,7 @@ impl LossEstimators {
                 relative_noise: s.assumed_noise,
             },
             rng,
+            kalman_only: false,
         })
     }
 
@@ -718,8 +741,25 @@ impl LossEstimators {
         exposure: prognos_core::plants::reaction_wheel::IntervalExposure<f64>,
         consumption: f64,
     ) {
+        let std = self.kalman.config().temperature_std;
+        self.push_with_temperature_std(exposure, consumption, std);
+    }
+
+    /// [`Self::push`] with this interval's standard deviation of the temperature estimate
+    /// (degC) for the Kalman filter's errors in variables.
+    pub fn push_with_temperature_std(
+        &mut self,
+        exposure: prognos_core::plants::reaction_wheel::IntervalExposure<f64>,
+        consumption: f64,
+        temperature_std: f64,
+    ) {
         // A rejected interval leaves the filter unchanged: nothing to do but go on.
-        let _ = self.kalman.update(&exposure, consumption);
+        let _ = self
+            .kalman
+            .update_with_temperature_std(&exposure, consumption, temperature_std);
+        if self.kalman_only {
+            return;
+        }
         let u = exposure.as_input();
         let _ = self.joint.step(
             &self.joint_model,
@@ -1015,6 +1055,9 @@ pub struct Step3Settings {
     pub eol_day: f64,
     /// Days simulated.
     pub days: f64,
+    /// Runs the log-linear Kalman filter alone (diagnosis: the paper's filters and their
+    /// predictions are skipped).
+    pub kalman_only: bool,
 }
 
 impl Step3Settings {
@@ -1029,11 +1072,15 @@ impl Step3Settings {
         // 4-s bursts with 32 particles err by a few tenths of a degree.
         step2.temperature_std = 0.2;
         step2.kalman_walk = (0.004, 0.0001);
+        // Burst errors (0.6 degC RMS, independent of the temperature) would pull b towards
+        // zero by about 4 % (docs/results.md, Table 7).
+        step2.kalman_bias_compensation = true;
         Self {
             step2,
             prediction_days: [30.0, 60.0],
             eol_day: 80.0,
             days: 90.0,
+            kalman_only: false,
         }
     }
 }
@@ -1079,9 +1126,62 @@ pub struct Step3Outcome {
     pub seconds: f64,
 }
 
+/// One burst's temperature reading: the posterior mean and standard deviation (degC).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BurstReading {
+    /// Posterior mean at the end of the burst (degC).
+    pub estimate: f64,
+    /// Posterior standard deviation (degC).
+    pub std: f64,
+}
+
+/// The step-3 thermometer pass alone: one burst per 4-minute interval over the settings'
+/// days. It draws from its own random streams, so [`run_step3_from_readings`] on its output
+/// is bit-identical to [`run_step3`] (the split lets the loss side be studied on stored
+/// readings).
+pub fn step3_readings(
+    settings: &Step3Settings,
+    scenario: FaultScenario,
+    seed: u64,
+) -> Vec<BurstReading> {
+    let intervals = (settings.days * DAY_S / INTERVAL_S).round() as usize;
+    let Some(mut thermometer) = BurstThermometer::<32>::new(settings.step2.thermometer, seed)
+    else {
+        return Vec::new();
+    };
+    let burst = settings.step2.thermometer.burst_s;
+    (0..intervals)
+        .map(|k| {
+            let t0 = k as f64 * INTERVAL_S;
+            let estimate = thermometer.burst(t0 + 0.5 * (INTERVAL_S - burst), |t| {
+                scenario.long_temperature(t)
+            });
+            BurstReading {
+                estimate,
+                std: thermometer.posterior_std(),
+            }
+        })
+        .collect()
+}
+
 /// One three-month run: per 4-minute interval a 20 Hz temperature burst, the consumption
 /// measurement and the two-step loss filters; RUL predictions at the given days.
 pub fn run_step3(settings: &Step3Settings, scenario: FaultScenario, seed: u64) -> Step3Outcome {
+    let start = std::time::Instant::now();
+    let readings = step3_readings(settings, scenario, seed);
+    let mut out = run_step3_from_readings(settings, scenario, seed, &readings);
+    out.seconds = start.elapsed().as_secs_f64();
+    out
+}
+
+/// The loss-estimation and RUL part of [`run_step3`] on the thermometer's readings (one per
+/// interval; a run with fewer readings than intervals returns an empty outcome).
+pub fn run_step3_from_readings(
+    settings: &Step3Settings,
+    scenario: FaultScenario,
+    seed: u64,
+    readings: &[BurstReading],
+) -> Step3Outcome {
     use prognos_core::plants::reaction_wheel::IntervalExposure;
     use prognos_core::prognose::eol::{PredictionSettings, predict_eol};
     let start = std::time::Instant::now();
@@ -1102,29 +1202,32 @@ pub fn run_step3(settings: &Step3Settings, scenario: FaultScenario, seed: u64) -
         truth_hi.push(hi);
     }
     let threshold = hi;
-
-    let Some(mut thermometer) = BurstThermometer::<32>::new(settings.step2.thermometer, seed)
-    else {
+    if readings.len() < intervals {
         return Step3Outcome::default();
-    };
+    }
     let Some(mut estimators) = LossEstimators::new(&settings.step2, seed) else {
         return Step3Outcome::default();
     };
+    estimators.kalman_only = settings.kalman_only;
     let mut noise_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x0DD_BA11);
     let mut out = Step3Outcome::default();
     let mut measured_hi = 0.0;
-    let burst = settings.step2.thermometer.burst_s;
     let debug = std::env::var_os("WHEEL_DEBUG").is_some();
-    for k in 0..intervals {
+    for (k, reading) in readings.iter().take(intervals).enumerate() {
         let t0 = k as f64 * INTERVAL_S;
-        let t_hat = thermometer.burst(t0 + 0.5 * (INTERVAL_S - burst), temperature);
+        let t_hat = reading.estimate;
+        let temperature_std = if settings.step2.posterior_temperature_std {
+            settings.step2.temperature_std.hypot(reading.std)
+        } else {
+            settings.step2.temperature_std
+        };
         let consumed = interval_consumption(t0, params, temperature);
         let measured = consumed
             * (settings.step2.relative_noise
                 * prognos_core::random::standard_normal::<f64, _>(&mut noise_rng))
             .exp();
         if let Ok(exposure) = IntervalExposure::constant(INTERVAL_S, t_hat) {
-            estimators.push(exposure, measured);
+            estimators.push_with_temperature_std(exposure, measured, temperature_std);
         }
         measured_hi += match scenario {
             FaultScenario::ExcessiveLoss => measured,
@@ -1187,7 +1290,9 @@ pub fn run_step3(settings: &Step3Settings, scenario: FaultScenario, seed: u64) -
                         p95: q(0.95),
                     })
                 };
-                if let Some(p) = predict(&mut estimators.two_step_particles()) {
+                if !settings.kalman_only
+                    && let Some(p) = predict(&mut estimators.two_step_particles())
+                {
                     out.predictions.push(p);
                 }
                 let mut sample_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x4B41_4C4D);

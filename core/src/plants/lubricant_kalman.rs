@@ -51,6 +51,14 @@ pub struct LossKalmanConfig<T> {
     pub gate: T,
     /// Forgetting factor of the measurement-variance estimate (0 keeps `R` nominal).
     pub noise_adaptation: T,
+    /// Compensate the errors-in-variables bias: a temperature estimate with independent
+    /// errors makes the regressor `1/T` noisy, which pulls `b` towards zero by the share of
+    /// the regressor's spread that is error. The update then removes the error's expected
+    /// contribution to the information and to the score (bias-compensated least squares),
+    /// with the error variance of `1/T` taken as `(temperature_std m^2)^2` plus the
+    /// adapted excess variance divided by `b^2` (the excess is attributed to the
+    /// temperature estimate).
+    pub bias_compensation: bool,
 }
 
 impl<T: Real> LossKalmanConfig<T> {
@@ -64,6 +72,7 @@ impl<T: Real> LossKalmanConfig<T> {
         enhancement: zero_vector(),
         gate: T::ZERO,
         noise_adaptation: T::ZERO,
+        bias_compensation: false,
     };
 
     /// Defaults for 4-minute intervals: slow walks, a gate of 25 (5 sigma), a change declared
@@ -79,6 +88,7 @@ impl<T: Real> LossKalmanConfig<T> {
             enhancement: Vector2::new(cast(10.0), cast(0.1)),
             gate: cast(25.0),
             noise_adaptation: cast(1.0 / 48.0),
+            bias_compensation: false,
         };
         config.check()?;
         Ok(config)
@@ -228,6 +238,50 @@ impl<T: Real> LossKalman<T> {
         self.excess_variance
     }
 
+    /// The bias-compensated update in information form: with `h` the regressor built from
+    /// the estimated `1/T` and `Sigma = diag(var(1/T error), 0)` its error covariance,
+    /// `Lambda' = P^-1 + (h h^T - Sigma) / r` and
+    /// `theta' = theta + Lambda'^-1 (h nu + Sigma theta) / r`, whose score has zero mean
+    /// under independent regressor errors (the plain update's has `-b var / r`). Returns
+    /// false, changing nothing, when the compensated information is not positive definite
+    /// (too little spread of the temperature yet); the caller then falls back to the plain
+    /// update.
+    fn compensated_update(
+        &mut self,
+        h: &Vector2<T>,
+        innovation: T,
+        r: T,
+        inverse_temperature_std: T,
+    ) -> bool {
+        let b = self.state.x;
+        let b_floor: T = cast(1.0);
+        let mut error_var = inverse_temperature_std * inverse_temperature_std;
+        if b.abs() > b_floor {
+            error_var += self.excess_variance / (b * b);
+        }
+        let Some(information) = self.covariance.try_inverse() else {
+            return false;
+        };
+        let sigma = Matrix2::new(error_var, T::zero(), T::zero(), T::zero());
+        let updated = information + (h * h.transpose() - sigma) / r;
+        let det = updated.determinant();
+        let information_b = updated.get((0, 0)).copied().unwrap_or_else(T::zero);
+        if !(det.finite() && det > T::zero() && information_b > T::zero()) {
+            return false;
+        }
+        let Some(covariance) = updated.try_inverse() else {
+            return false;
+        };
+        let score = (h * innovation + Vector2::new(error_var * b, T::zero())) / r;
+        let state = self.state + covariance * score;
+        if !(state.iter().all(|v| v.finite()) && covariance.iter().all(|v| v.finite())) {
+            return false;
+        }
+        self.state = state;
+        self.covariance = covariance;
+        true
+    }
+
     /// How many changes the detector has declared so far.
     pub fn changes_detected(&self) -> u32 {
         self.changes
@@ -246,7 +300,22 @@ impl<T: Real> LossKalman<T> {
         exposure: &IntervalExposure<T>,
         consumption: T,
     ) -> Result<LossKalmanReport<T>, Error> {
+        self.update_with_temperature_std(exposure, consumption, self.config.temperature_std)
+    }
+
+    /// [`Self::update`] with this interval's own standard deviation of the temperature
+    /// estimate (degC) in place of the configured one: a thermometer that reports its
+    /// posterior spread per interval. A negative or non-finite value is an `Err`.
+    pub fn update_with_temperature_std(
+        &mut self,
+        exposure: &IntervalExposure<T>,
+        consumption: T,
+        temperature_std: T,
+    ) -> Result<LossKalmanReport<T>, Error> {
         exposure.check()?;
+        if !(temperature_std.finite() && temperature_std >= T::zero()) {
+            return Err(Error::InvalidParameter("temperature_std"));
+        }
         if !consumption.finite() {
             return Err(Error::NonFiniteMeasurement);
         }
@@ -272,7 +341,7 @@ impl<T: Real> LossKalman<T> {
         let unit: T = cast(BETA_UNIT);
         let predicted = (exposure.duration * unit).ln() + log_beta - b * m + curvature.ln();
         let h = Vector2::new(-m + b * v / curvature, T::one());
-        let temperature_term = b * self.config.temperature_std * m * m;
+        let temperature_term = b * temperature_std * m * m;
         let r = next.config.relative_noise * next.config.relative_noise
             + temperature_term * temperature_term
             + next.excess_variance;
@@ -308,14 +377,17 @@ impl<T: Real> LossKalman<T> {
             next.excess_variance =
                 ((T::one() - lambda) * next.excess_variance + lambda * sample).max(T::zero());
         }
-        if fused {
+        let compensated = fused
+            && next.config.bias_compensation
+            && next.compensated_update(&h, innovation, r, temperature_std * m * m);
+        if fused && !compensated {
             // Joseph-form update: stays symmetric positive semi-definite under round-off.
             let gain = next.covariance * h / s;
             next.state += gain * innovation;
             let i_kh = Matrix2::identity() - gain * h.transpose();
             next.covariance =
                 i_kh * next.covariance * i_kh.transpose() + gain * gain.transpose() * r;
-        } else {
+        } else if !fused {
             flags.insert(Flags::MEASUREMENT_REJECTED);
         }
         if symmetrise(&mut next.covariance) {
@@ -422,6 +494,40 @@ mod tests {
         assert_eq!(kf.state(), &converged);
         assert!(LossKalmanConfig::new(0.0, 0.05).is_err());
         assert!(LossKalman::new(config, 37.0, 2.0, -1.0, 0.05).is_err());
+    }
+
+    #[test]
+    fn bias_compensation_removes_the_pull_of_a_noisy_thermometer_on_b() {
+        use rand_core::SeedableRng;
+        // Independent 0.6 degC errors on a +-4 degC cycle: the plain filter's b is pulled
+        // towards zero by about 0.36 / (8 + 0.36) = 4 %.
+        let run = |compensate: bool, seed: u64| {
+            let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
+            let config = LossKalmanConfig {
+                walk: Vector2::new(1e-4, 1e-6),
+                noise_adaptation: 0.0,
+                bias_compensation: compensate,
+                ..LossKalmanConfig::new(0.0025, 0.6).unwrap()
+            };
+            let mut kf = LossKalman::new(config, 37.0, 2.0, 7.494e-6, 0.05).unwrap();
+            for k in 0..4000 {
+                let temperature = 30.0 + 4.0 * (k as f64 * 0.26).sin();
+                let noise = 0.6 * crate::random::standard_normal::<f64, _>(&mut rng);
+                let e = IntervalExposure::constant(240.0, temperature + noise).unwrap();
+                kf.update(&e, consumption(37.0, 7.494e-6, temperature))
+                    .unwrap();
+            }
+            kf.parameters().0
+        };
+        for seed in [5, 6] {
+            let plain = run(false, seed);
+            let compensated = run(true, seed);
+            assert!(plain < 36.2, "plain b {plain}");
+            assert!(
+                (compensated - 37.0).abs() < 0.4,
+                "compensated b {compensated}"
+            );
+        }
     }
 
     #[test]
