@@ -351,10 +351,10 @@ pub fn run_experiment_in<T: Real, const N: usize>(
     pf.init_with(&mut rng, |_, r| {
         let mut x = x0;
         for (k, (lo, hi)) in prior.iter().enumerate() {
-            if let Some(p_active) = exp.prior_active_probability {
-                if uniform01::<f64, _>(r) >= p_active {
-                    continue;
-                }
+            if let Some(p_active) = exp.prior_active_probability
+                && uniform01::<f64, _>(r) >= p_active
+            {
+                continue;
             }
             let u: f64 = uniform01(r);
             if *lo > 0.0 {
@@ -389,8 +389,8 @@ pub fn run_experiment_in<T: Real, const N: usize>(
         if setup.thresholds.exceeded(&truth.state) {
             true_eol = cycle as f64;
             if exp.interpolated_eol && cycle > 0 {
-                true_eol -= 1.0
-                    - threshold_crossing(&setup.thresholds, &cycle_start_state, &truth.state);
+                true_eol -=
+                    1.0 - threshold_crossing(&setup.thresholds, &cycle_start_state, &truth.state);
             }
             break 'cycles;
         }
