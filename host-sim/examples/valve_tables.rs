@@ -19,10 +19,11 @@ fn main() {
             print!("{}", result.render());
         }
         "table3-diag" => {
-            // Table 3 with 500 particles, printing every estimated wear every 5 cycles.
+            // Table 3 (N = 2000), printing every estimated wear every `step` cycles.
             let setup = prognos_sim::valve::ValveSetup::new();
             let exp = prognos_sim::valve::table3_experiment(&setup, num(1, 1));
-            let run = prognos_sim::valve::run_experiment::<500>(&setup, &exp);
+            let run = prognos_sim::valve::run_experiment::<2000>(&setup, &exp);
+            let step = num(2, 5) as usize;
             for (mode, est) in exp.estimated.iter().zip(&run.estimate_per_cycle) {
                 let i = mode.wear_index() - 9;
                 let scale = if exp.true_wear[i] > 0.0 {
@@ -32,7 +33,7 @@ fn main() {
                 };
                 let v: Vec<String> = est
                     .iter()
-                    .step_by(5)
+                    .step_by(step)
                     .map(|e| format!("{:.3}", e / scale))
                     .collect();
                 println!("{:>22} (/ {:.3e}): {}", mode.name(), scale, v.join(" "));

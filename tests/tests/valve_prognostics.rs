@@ -37,3 +37,32 @@ fn bottom_leak_rul_is_accurate_with_continuous_sensors() {
     }
     assert!(result.mean_ra() > 85.0, "mean RA {}", result.mean_ra());
 }
+
+/// With `interpolated_eol` the truth EOL is the moment the linearly growing bottom leak
+/// crosses its threshold (not the next cycle start), and the particles' EOLs are placed the
+/// same way, so the predictions stay accurate.
+#[test]
+fn interpolated_eol_is_the_continuous_threshold_crossing() {
+    let setup = ValveSetup::new();
+    let mut exp = table2_experiment(&setup, DamageMode::BottomLeak, MeasurementSet::All, 7);
+    exp.true_wear[4] *= 5.0;
+    exp.random_walk_rel *= 5.0;
+    exp.prediction_points = vec![6.0, 10.0, 14.0];
+    exp.prmse_skip_cycles = 4;
+    exp.interpolated_eol = true;
+    let result = run_experiment::<200>(&setup, &exp);
+    let period = setup.table.period;
+    let crossing = setup.thresholds.a_eb_max / (exp.true_wear[4] * period);
+    // The truth's leak area grows in 10 ms steps: the crossing is exact to one step.
+    assert!(
+        (result.true_eol - crossing).abs() < 0.02 / period,
+        "EOL {} vs crossing {crossing}",
+        result.true_eol
+    );
+    assert!(result.true_eol.fract() > 1e-6, "EOL {}", result.true_eol);
+    assert_eq!(result.predictions.len(), 3);
+    for p in &result.predictions {
+        assert!(p.median_rul.fract() != 0.0 || p.median_rul == 0.0, "{p:?}");
+        assert!(p.ra >= 80.0, "{p:?}");
+    }
+}
