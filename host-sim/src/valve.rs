@@ -549,6 +549,9 @@ pub fn run_experiment_in<T: Real, const N: usize>(
     }
 }
 
+/// Cycles an EOL prediction simulates at most.
+const PREDICTION_HORIZON_CYCLES: u32 = 5000;
+
 /// RUL samples [cycles] and weights of every particle at prediction time `t_p` [cycles]
 /// (Algorithm 3 with the cycle-level model: the particle first completes its current cycle,
 /// then advances whole cycles until a damage variable is past its threshold at a cycle start).
@@ -571,7 +574,7 @@ fn predict_rul<T: Real, const N: usize>(
         })
         .collect();
     let mut times = vec![0.0; N];
-    let settings = PredictionSettings::deterministic(1.0, 5000);
+    let settings = PredictionSettings::deterministic(1.0, PREDICTION_HORIZON_CYCLES);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(0);
     let _ = predict_eol(
         &model,
@@ -582,7 +585,19 @@ fn predict_rul<T: Real, const N: usize>(
         &mut rng,
         &mut times,
     );
-    let mut rul: Vec<f64> = times.iter().map(|k| next_start + k - t_p).collect();
+    // A particle that does not reach EOL within the horizon counts as the horizon (a censored
+    // sample: it leaves the median and percentiles below it alone and keeps the mean finite).
+    let horizon = f64::from(PREDICTION_HORIZON_CYCLES);
+    let mut rul: Vec<f64> = times
+        .iter()
+        .map(|k| {
+            if *k >= f64::MAX / 2.0 {
+                horizon
+            } else {
+                next_start + k - t_p
+            }
+        })
+        .collect();
     if interpolated {
         // Replay each trajectory to the cycle that crosses and place the crossing inside it
         // (the first "cycle" is the partial one from t_p to the next cycle start).
