@@ -114,6 +114,9 @@ fn main() {
     if let Some(v) = env("REPLAY_BIAS") {
         settings.step2.kalman_bias_compensation = v > 0.0;
     }
+    if let Some(v) = env("REPLAY_CUSUM_CAP") {
+        settings.step2.kalman_change_increment_cap = v;
+    }
     if let Some(v) = env("REPLAY_TEMPERATURE_STD") {
         settings.step2.temperature_std = v;
     }

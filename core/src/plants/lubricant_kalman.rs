@@ -49,6 +49,11 @@ pub struct LossKalmanConfig<T> {
     pub enhancement: Vector2<T>,
     /// NIS above which a measurement that does not complete a change is rejected.
     pub gate: T,
+    /// Largest NIS one interval adds to the CUSUM (Huber-type clipping, at most `gate`):
+    /// below the gate a change then needs `change_threshold / (cap - change_drift)`
+    /// large innovations, so that a few heavy-tailed input errors cannot declare one
+    /// while a true, persistent change still does.
+    pub change_increment_cap: T,
     /// Forgetting factor of the measurement-variance estimate (0 keeps `R` nominal).
     pub noise_adaptation: T,
     /// Compensate the errors-in-variables bias: a temperature estimate with independent
@@ -71,6 +76,7 @@ impl<T: Real> LossKalmanConfig<T> {
         change_threshold: T::ZERO,
         enhancement: zero_vector(),
         gate: T::ZERO,
+        change_increment_cap: T::ZERO,
         noise_adaptation: T::ZERO,
         bias_compensation: false,
     };
@@ -87,6 +93,7 @@ impl<T: Real> LossKalmanConfig<T> {
             change_threshold: cast(30.0),
             enhancement: Vector2::new(cast(10.0), cast(0.1)),
             gate: cast(25.0),
+            change_increment_cap: cast(25.0),
             noise_adaptation: cast(1.0 / 48.0),
             bias_compensation: false,
         };
@@ -114,6 +121,9 @@ impl<T: Real> LossKalmanConfig<T> {
         }
         if !positive(self.gate) {
             return Err(Error::InvalidParameter("gate"));
+        }
+        if !(positive(self.change_increment_cap) && self.change_increment_cap <= self.gate) {
+            return Err(Error::InvalidParameter("change_increment_cap"));
         }
         if !(non_negative(self.noise_adaptation) && self.noise_adaptation < T::one()) {
             return Err(Error::InvalidParameter("noise_adaptation"));
@@ -355,10 +365,11 @@ impl<T: Real> LossKalman<T> {
             return Err(Error::NonFiniteState);
         }
 
-        // CUSUM change detector on the NIS, each increment capped at the gate so that one
-        // outlier alone cannot declare a change (it takes two consecutive ones).
-        next.cusum =
-            (next.cusum + nis.min(next.config.gate) - next.config.change_drift).max(T::zero());
+        // CUSUM change detector on the NIS, each increment capped (at most at the gate) so
+        // that one outlier alone cannot declare a change.
+        next.cusum = (next.cusum + nis.min(next.config.change_increment_cap)
+            - next.config.change_drift)
+            .max(T::zero());
         let change_detected = next.cusum > next.config.change_threshold;
         if change_detected {
             let e = next.config.enhancement;
@@ -465,6 +476,48 @@ mod tests {
         let (b, beta) = kf.parameters();
         assert!((b - 25.0).abs() < 0.1, "b = {b}");
         assert!((beta / 8.054e-6 - 1.0).abs() < 5e-3, "beta = {beta}");
+    }
+
+    #[test]
+    fn a_capped_cusum_ignores_outlier_pairs_but_still_detects_a_step() {
+        // Pairs of consecutive 5 % outliers (heavy-tailed input errors) every 30 intervals,
+        // then a persistent step in the parameters at interval 600.
+        let run = |cap: f64| {
+            let config = LossKalmanConfig {
+                change_increment_cap: cap,
+                ..LossKalmanConfig::new(0.0025, 0.0).unwrap()
+            };
+            let mut kf = LossKalman::new(config, 37.0, 2.0, 7.494e-6, 0.05).unwrap();
+            let mut before_step = 0;
+            for k in 0..700 {
+                let temperature = 30.0 + 4.0 * (k as f64 * 0.26).sin();
+                let (b, beta) = if k < 600 {
+                    (37.0, 7.494e-6)
+                } else {
+                    (25.0, 8.054e-6)
+                };
+                let outlier = k < 600 && k >= 100 && k % 30 < 2;
+                let y = consumption(b, beta, temperature) * if outlier { 1.05 } else { 1.0 };
+                let e = IntervalExposure::constant(240.0, temperature).unwrap();
+                let report = kf.update(&e, y).unwrap();
+                if report.change_detected && k < 600 {
+                    before_step += 1;
+                }
+            }
+            (before_step, kf.changes_detected(), kf.parameters())
+        };
+        let (false_uncapped, _, _) = run(25.0);
+        assert!(false_uncapped >= 10, "uncapped: {false_uncapped}");
+        let (false_capped, total, (b, beta)) = run(9.0);
+        assert_eq!(false_capped, 0);
+        assert!(total >= 1);
+        assert!((b - 25.0).abs() < 0.2, "b = {b}");
+        assert!((beta / 8.054e-6 - 1.0).abs() < 1e-2, "beta = {beta}");
+        let bad_cap = LossKalmanConfig {
+            change_increment_cap: 30.0,
+            ..LossKalmanConfig::new(0.0025, 0.0).unwrap()
+        };
+        assert!(LossKalman::new(bad_cap, 37.0, 2.0, 7.494e-6, 0.05).is_err());
     }
 
     #[test]
