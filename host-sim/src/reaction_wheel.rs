@@ -1084,8 +1084,7 @@ impl Step3Settings {
         // made about 100 false change declarations per 60 days. Clipping each interval's CUSUM
         // increment at 9 (3 sigma) takes 6 or more large innovations (under half an hour)
         // for a change, negligible against tens of thousands of intervals (docs/results.md,
-        // Table 7);
-        // Table 6's 90 intervals keep the gate, where the delay would cost accuracy.
+        // Table 7); Table 6's 90 intervals keep the gate, where the delay costs accuracy.
         step2.kalman_change_increment_cap = 9.0;
         Self {
             step2,

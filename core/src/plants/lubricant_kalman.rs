@@ -496,7 +496,7 @@ mod tests {
                 } else {
                     (25.0, 8.054e-6)
                 };
-                let outlier = k < 600 && k >= 100 && k % 30 < 2;
+                let outlier = (100..600).contains(&k) && k % 30 < 2;
                 let y = consumption(b, beta, temperature) * if outlier { 1.05 } else { 1.0 };
                 let e = IntervalExposure::constant(240.0, temperature).unwrap();
                 let report = kf.update(&e, y).unwrap();
