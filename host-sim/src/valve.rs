@@ -749,6 +749,19 @@ pub fn table2_experiment(
     }
 }
 
+/// The short test experiment: Table 2's bottom external leak with all continuous sensors,
+/// the leak growing five times faster (EOL near 20 cycles; the walk's relative size per cycle
+/// kept: the wear's order of magnitude did not change, the rate did), predictions at cycles
+/// 6, 10 and 14.
+pub fn fast_bottom_leak_experiment(setup: &ValveSetup, seed: u64) -> Experiment {
+    let mut exp = table2_experiment(setup, DamageMode::BottomLeak, MeasurementSet::All, seed);
+    exp.true_wear[4] *= 5.0;
+    exp.random_walk_rel *= 5.0;
+    exp.prediction_points = vec![6.0, 10.0, 14.0];
+    exp.prmse_skip_cycles = 4;
+    exp
+}
+
 /// Reproduces Table 2: 5 faults x 4 sensor sets x `runs` runs, N = 500, in parallel.
 pub fn table2(runs: usize, seed: u64) -> Table2Result {
     let started = std::time::Instant::now();

@@ -1,21 +1,17 @@
 //! The valve pipeline in single precision (as on the Cortex-M4F) against double precision:
 //! the same truth plant, measurements and seeds, the particle filter computing in f32 or f64.
 
-use prognos_core::plants::valve::{DamageMode, MeasurementSet, idx};
+use prognos_core::plants::valve::idx;
 use prognos_sim::valve::{
-    RunResult, SAMPLE_DT, SAMPLES_PER_CYCLE, ValveSetup, cycle_input, run_experiment_in,
-    table2_experiment,
+    RunResult, SAMPLE_DT, SAMPLES_PER_CYCLE, ValveSetup, cycle_input, fast_bottom_leak_experiment,
+    run_experiment_in,
 };
 
 /// Bottom external leak growing five times faster than in Table 2 (EOL near 20 cycles), all
 /// continuous sensors, 200 particles, predictions at cycles 6, 10 and 14.
 fn run<T: prognos_core::Real>() -> (RunResult, f64) {
     let setup = ValveSetup::new();
-    let mut exp = table2_experiment(&setup, DamageMode::BottomLeak, MeasurementSet::All, 7);
-    exp.true_wear[4] *= 5.0;
-    exp.random_walk_rel *= 5.0;
-    exp.prediction_points = vec![6.0, 10.0, 14.0];
-    exp.prmse_skip_cycles = 4;
+    let exp = fast_bottom_leak_experiment(&setup, 7);
     let w_true = exp.true_wear[4];
     (run_experiment_in::<T, 200>(&setup, &exp), w_true)
 }

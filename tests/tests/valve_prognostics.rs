@@ -1,7 +1,6 @@
 //! End-to-end valve prognostics: truth plant -> core SIR particle filter -> EOL prediction.
 
-use prognos_core::plants::valve::{DamageMode, MeasurementSet};
-use prognos_sim::valve::{ValveSetup, run_experiment, table2_experiment};
+use prognos_sim::valve::{ValveSetup, fast_bottom_leak_experiment, run_experiment};
 
 /// Bottom external leak growing five times faster than in Table 2 (EOL near 20 cycles), all
 /// continuous sensors, 200 particles: the wear estimate settles near the truth and the RUL
@@ -11,13 +10,7 @@ use prognos_sim::valve::{ValveSetup, run_experiment, table2_experiment};
 #[test]
 fn bottom_leak_rul_is_accurate_with_continuous_sensors() {
     let setup = ValveSetup::new();
-    let mut exp = table2_experiment(&setup, DamageMode::BottomLeak, MeasurementSet::All, 7);
-    exp.true_wear[4] *= 5.0;
-    // Keep the walk's relative size per cycle as in Table 2 (the wear's order of magnitude
-    // did not change, the rate did).
-    exp.random_walk_rel *= 5.0;
-    exp.prediction_points = vec![6.0, 10.0, 14.0];
-    exp.prmse_skip_cycles = 4;
+    let exp = fast_bottom_leak_experiment(&setup, 7);
     let result = run_experiment::<200>(&setup, &exp);
     assert!(
         (18.0..=22.0).contains(&result.true_eol),
@@ -44,11 +37,7 @@ fn bottom_leak_rul_is_accurate_with_continuous_sensors() {
 #[test]
 fn interpolated_eol_is_the_continuous_threshold_crossing() {
     let setup = ValveSetup::new();
-    let mut exp = table2_experiment(&setup, DamageMode::BottomLeak, MeasurementSet::All, 7);
-    exp.true_wear[4] *= 5.0;
-    exp.random_walk_rel *= 5.0;
-    exp.prediction_points = vec![6.0, 10.0, 14.0];
-    exp.prmse_skip_cycles = 4;
+    let mut exp = fast_bottom_leak_experiment(&setup, 7);
     exp.interpolated_eol = true;
     let result = run_experiment::<200>(&setup, &exp);
     let period = setup.table.period;
