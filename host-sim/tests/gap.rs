@@ -109,6 +109,31 @@ fn gap_finds_the_scooter_encoder_efficiency_under_its_own_name() {
 }
 
 #[test]
+fn scooter_noise_is_estimated_from_the_residual_and_the_shrink_is_measured() {
+    // The scooter's front wheel oscillates near 6 Hz: second differences of the raw signal
+    // over-estimate the sensor noise (1e-3 rad/s, 1e-4 m/s) several times, which hid every
+    // gap below the noise (shrink 0). The model's residual gives the sensors' own level.
+    let dir = scratch("scooter-noise");
+    let d = one("scooter", "rear_coulomb_friction", 2.0);
+    let csv = write(&dir, &d);
+    let out = dir.join("out");
+    let o = prognos(&["gap", "--data", s(&csv), "--out", s(&out)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let verdict: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
+    let truth = [1e-3, 1e-4, 1e-3];
+    for (level, want) in verdict["noise"].as_array().unwrap().iter().zip(truth) {
+        let got = level["std"].as_f64().unwrap();
+        assert!((got / want - 1.0).abs() < 0.15, "{level} vs {want}");
+        assert_eq!(level["source"], "residual differences");
+    }
+    assert_eq!(verdict["verdict"], "rear_coulomb_friction");
+    let top = &verdict["ranking"][0];
+    assert!(top["gap_before"].as_f64().unwrap() > 1.0, "{top:#}");
+    assert!(top["shrink"].as_f64().unwrap() > 0.8, "{top:#}");
+}
+
+#[test]
 fn gap_finds_a_coarse_quantiser_by_likelihood_on_motor_data() {
     // Steps of about seven noise std: the noise estimated from the data absorbs the
     // quantiser's variance, so only the quantised likelihood shows it.

@@ -346,6 +346,7 @@ pub fn diagnose_with(
         init_sensitivity,
     };
     problem.refit_nominal();
+    refine_noise_from_residuals(&mut problem, &mut noise);
     let report = analyse(&problem);
     let (verdict, ranking, pairs) = decide(&problem, &report);
     let mut report = report;
@@ -377,6 +378,45 @@ pub fn diagnose_with(
         spectrum: report.spectrum.clone(),
         overlays,
     })
+}
+
+/// Re-estimates the noise of channels whose level came from the data's own differences
+/// from the differences of the model's residual instead, when that is lower. Second
+/// differences of the raw signal also carry the signal's curvature (a fast mode such as the
+/// scooter's wheel oscillation inflates them several times), which makes every gap look
+/// like noise; the replay removes the curvature the model explains, so the residual's
+/// differences are closer to the sensor noise. Both estimates only over-estimate a white
+/// noise (an unexplained smooth gap adds little to second differences), hence the smaller.
+/// Channels on a lattice (a coarse quantiser) keep the raw estimate. The initial condition
+/// is refitted with the new weights.
+fn refine_noise_from_residuals(problem: &mut Problem, noise: &mut [NoiseLevel]) {
+    let mut changed = false;
+    for (c, level) in noise.iter_mut().enumerate() {
+        // A quantised channel's residual is a staircase minus a smooth replay: its second
+        // differences are nearly all the replay's, not the noise's.
+        if level.source != "differences"
+            || crate::gap::effects::lattice_step(&problem.measured[c]).is_some()
+        {
+            continue;
+        }
+        let residual: Vec<f64> = problem.measured[c]
+            .iter()
+            .zip(&problem.nominal.outputs[c])
+            .map(|(y, m)| y - m)
+            .collect();
+        if let Some((s, dof)) = noise_std_from_differences(&residual)
+            && s < problem.sigma[c]
+        {
+            problem.sigma[c] = s;
+            problem.sigma_dof[c] = dof;
+            level.std = s;
+            level.source = "residual differences";
+            changed = true;
+        }
+    }
+    if changed {
+        problem.refit_nominal();
+    }
 }
 
 /// The candidates (single and pairs) that the held-out data do not separate from the
@@ -514,8 +554,9 @@ pub fn plant_data(recording: &Recording, dt: f64) -> PlantData {
 
 /// Fits every candidate and decides the verdict: when no test rejects, the best single
 /// effect if it explains the gap, else `none`; otherwise the best single effect when it explains
-/// the gap (score >= [`MIN_SCORE`], shrink >= [`EXPLAIN_SHRINK`]) and shrinks it by at least
-/// [`PAIR_TRIGGER`]; else the best pair when it explains the gap and beats the single by
+/// the gap (score >= [`MIN_SCORE`], and shrink >= [`EXPLAIN_SHRINK`] or a held-out gap left
+/// below [`Problem::gap_resolution`]) and shrinks it by at least [`PAIR_TRIGGER`] or to
+/// below the resolution; else the best pair when it explains the gap and beats the single by
 /// [`MIN_SCORE`] and 0.1 in shrink; else the single when it explains; else `unknown`.
 /// Returns the verdict, the single effects (best first) and the pairs tried.
 pub fn decide(
@@ -529,8 +570,10 @@ pub fn decide(
         .collect();
     evaluated.sort_by(|a, b| b.score.total_cmp(&a.score));
     let resolution = problem.gap_resolution();
+    // What a candidate leaves below the resolution is noise, whatever fraction it removed
+    // (a gap just above the resolution cannot shrink by much in relative terms).
     let explains = |e: &Evaluation| {
-        e.score >= MIN_SCORE && (e.shrink >= EXPLAIN_SHRINK || e.gap_before < resolution)
+        e.score >= MIN_SCORE && (e.shrink >= EXPLAIN_SHRINK || e.gap_after < resolution)
     };
     let Some(best) = evaluated.first().cloned() else {
         return ("unknown".into(), evaluated, Vec::new());
@@ -545,7 +588,7 @@ pub fn decide(
         };
         return (verdict, evaluated, Vec::new());
     }
-    if explains(&best) && (best.shrink >= PAIR_TRIGGER || best.gap_before < resolution) {
+    if explains(&best) && (best.shrink >= PAIR_TRIGGER || best.gap_after < resolution) {
         return (best.effect.clone(), evaluated, Vec::new());
     }
     // Forward step: every other candidate added to the best single effect, both fitted

@@ -162,18 +162,39 @@ pub fn quantised_mean(v: f64, q: f64, s: f64) -> f64 {
         }
         return v - q / std::f64::consts::PI * acc;
     }
-    // Few lattice points carry the probability: sum them.
+    lattice_moments(v, q, s).0
+}
+
+/// Mean and variance of the reading of [`quantised_mean`]'s quantiser summed over the few
+/// lattice points that carry the probability (noise below half a step).
+fn lattice_moments(v: f64, q: f64, s: f64) -> (f64, f64) {
     let centre = (v / q).round();
-    let reach = (6.0 * r).ceil() + 1.0;
+    let reach = (6.0 * s / q).ceil() + 1.0;
     let cdf = |x: f64| 0.5 * libm::erfc(-x / std::f64::consts::SQRT_2);
-    let mut acc = 0.0;
+    let (mut m1, mut m2) = (0.0, 0.0);
     let mut j = centre - reach;
     while j <= centre + reach {
         let p = cdf((q * (j + 0.5) - v) / s) - cdf((q * (j - 0.5) - v) / s);
-        acc += q * j * p;
+        m1 += q * j * p;
+        m2 += (q * j).powi(2) * p;
         j += 1.0;
     }
-    acc
+    (m1, (m2 - m1 * m1).max(0.0))
+}
+
+/// Variance of that reading around [`quantised_mean`]: what is left after the candidate's
+/// prediction when the quantiser is the whole gap (near a threshold the reading jumps a
+/// whole step at random). Dithered (noise of half a step or more): `s^2 + q^2 / 12`.
+pub fn quantised_variance(v: f64, q: f64, s: f64) -> f64 {
+    let q = q.max(1e-300);
+    let r = s / q;
+    if r.is_nan() || r <= 1e-9 {
+        0.0
+    } else if r >= 0.5 {
+        s * s + q * q / 12.0
+    } else {
+        lattice_moments(v, q, s).1
+    }
 }
 
 /// One part of a candidate.
@@ -510,6 +531,55 @@ impl<'a> Problem<'a> {
             .sqrt()
     }
 
+    /// [`Problem::gap`] of a candidate's replay `sim`, where a quantiser among its
+    /// components `fitted` also predicts the reading's variance: the residual of its channel
+    /// is measured against the larger of the noise and that variance (a coarse quantiser
+    /// near a threshold reads a whole step off at random, which no mean prediction removes
+    /// and which is the noise of a quantised sensor, not a gap).
+    pub fn gap_of(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> f64 {
+        let mut total = 0.0;
+        for (c, (y, m)) in self.measured.iter().zip(&sim.outputs).enumerate() {
+            let s2 = self.sigma[c] * self.sigma[c];
+            let quantiser = fitted.iter().find_map(|(comp, v)| match comp {
+                Component::Generic(GenericKind::Quantisation, ch) if *ch == c => Some((
+                    v.first().copied().unwrap_or(0.0),
+                    v.get(1).copied().unwrap_or(0.0),
+                )),
+                _ => None,
+            });
+            // The quantiser's input: the candidate's replay without the quantiser.
+            let input = quantiser.and_then(|_| {
+                let others: Vec<(Component, Vec<f64>)> = fitted
+                    .iter()
+                    .filter(|(comp, _)| {
+                        !matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c)
+                    })
+                    .cloned()
+                    .collect();
+                self.predict(&others).ok().map(|p| p.outputs[c].clone())
+            });
+            let (mut acc, mut n) = (0.0, 0usize);
+            for k in 0..y.len() {
+                if !(self.test[k] && y[k].is_finite()) {
+                    continue;
+                }
+                let var = match (quantiser, &input) {
+                    (Some((q, s)), Some(v)) => s2.max(quantised_variance(v[k], q, s)),
+                    _ => s2,
+                };
+                let r = y[k] - m[k];
+                acc += if r.is_finite() {
+                    r * r / var
+                } else {
+                    f64::INFINITY
+                };
+                n += 1;
+            }
+            total += (acc / n.max(1) as f64 - 1.0).max(0.0);
+        }
+        total.sqrt()
+    }
+
     /// The smallest held-out gap that noise cannot produce: three standard deviations of
     /// `sum_c (MSE_c / sigma_c^2 - 1)` when the model is right (each term has variance
     /// `2 / n_c + 2 / dof_c`, the held-out count and the noise estimate's degrees of
@@ -655,7 +725,7 @@ impl<'a> Problem<'a> {
         let fitted = assemble(components, &dims, &theta);
         let sim = self.predict(&fitted).ok()?;
         let before = self.gap(&self.nominal);
-        let after = self.gap(&sim);
+        let after = self.gap_of(&sim, &fitted);
         let nominal_score = self.held_out_score(&self.nominal, 0);
         let absolute = self.held_out_score(&sim, dims.len());
         let names: Vec<String> = components.iter().map(|c| self.component_name(c)).collect();
@@ -980,6 +1050,19 @@ mod tests {
         // Equal candidates are not separated; the worse one has z <= 0.
         assert_eq!(separation(&b, &b), 0.0);
         assert!(separation(&b, &a) <= 0.0);
+    }
+
+    #[test]
+    fn quantised_variance_is_zero_between_thresholds_and_a_coin_flip_on_one() {
+        // Far from a threshold with little noise the reading is certain.
+        assert!(quantised_variance(0.0, 1.0, 0.05) < 1e-12);
+        // On a threshold it reads 0 or 1 with equal chance: variance q^2 / 4.
+        assert!((quantised_variance(0.5, 1.0, 0.01) - 0.25).abs() < 1e-6);
+        // Dithered: Sheppard's correction.
+        assert!((quantised_variance(0.3, 1.0, 2.0) - (4.0 + 1.0 / 12.0)).abs() < 1e-12);
+        // The direct sum meets it where the two branches meet.
+        let v = quantised_variance(0.3, 1.0, 0.4999);
+        assert!((v - (0.25 + 1.0 / 12.0)).abs() < 0.01, "{v}");
     }
 
     #[test]
