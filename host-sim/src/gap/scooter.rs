@@ -367,7 +367,10 @@ mod tests {
         }
         assert_eq!((x[R_RV], x[K1]), (model.params.r_rv, model.params.k1));
         let plant = ScooterGapPlant;
-        let sim = plant.simulate(&plant.default_params(), &[], &data).unwrap();
+        // The core model's own step is RK4 at 2 sub-steps; the replay's default is finer.
+        let mut params = plant.default_params();
+        params.insert("substeps".into(), 2.0);
+        let sim = plant.simulate(&params, &[], &data).unwrap();
         let err = sim.outputs[0]
             .iter()
             .zip(&rear)
