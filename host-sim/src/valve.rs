@@ -2,10 +2,12 @@
 //! shortcuts, with sensors; joint state-parameter estimation with the core SIR particle filter,
 //! EOL/RUL prediction in cycles, and the Table 2 / Table 3 campaigns.
 //!
-//! Speed scheme (see `docs/deviations.md`): the filter samples every 0.1 s and its model
-//! sub-steps at 0.01 s with friction implicit; a particle resting at a stop with settled
-//! chambers is fast-forwarded (only the time-driven leak areas grow); prediction advances
-//! each particle a whole cycle at a time with tabulated cycle work (`DamageRateTable`).
+//! Speed scheme (see `docs/deviations.md`): the filter samples every 0.1 s (`{open, closed}`
+//! in Tables 2 and 3: every 10 ms while the valve travels, `Experiment::travel_poll_dt`) and
+//! its model sub-steps at 0.01 s with friction implicit; a particle resting at a stop with
+//! settled chambers is fast-forwarded (only the time-driven leak areas grow); prediction
+//! advances each particle a whole cycle at a time with tabulated cycle work
+//! (`DamageRateTable`).
 
 use crate::lockstep::InjectedFaults;
 use crate::scenario::SensorFaults;
@@ -29,8 +31,8 @@ pub const FLUID: [f64; 2] = [3.5e5, 2.0e5];
 pub const SAMPLE_DT: f64 = 0.1;
 /// Internal step of the truth plant [s]: the filter model's step (see `Experiment`).
 pub const TRUTH_SUBSTEP: f64 = 0.01;
-/// Poll period of the discrete sensors while the valve travels (Table 2 `{open, closed}`):
-/// the filter model's step.
+/// Poll period of the discrete sensors while the valve travels (`{open, closed}` in Tables 2
+/// and 3): the filter model's step.
 pub const TRAVEL_POLL_DT: f64 = 0.01;
 /// Samples per 30 s cycle.
 pub const SAMPLES_PER_CYCLE: usize = 300;
@@ -814,8 +816,19 @@ pub fn table2_experiment(
 /// kept: the wear's order of magnitude did not change, the rate did), predictions at cycles
 /// 6, 10 and 14.
 pub fn fast_bottom_leak_experiment(setup: &ValveSetup, seed: u64) -> Experiment {
-    let mut exp = table2_experiment(setup, DamageMode::BottomLeak, MeasurementSet::All, seed);
-    exp.true_wear[4] *= 5.0;
+    fast_experiment(setup, DamageMode::BottomLeak, MeasurementSet::All, seed)
+}
+
+/// [`fast_bottom_leak_experiment`] for any fault and sensor set: Table 2's experiment with
+/// the wear five times faster (EOL near 20 cycles), predictions at cycles 6, 10 and 14.
+pub fn fast_experiment(
+    setup: &ValveSetup,
+    mode: DamageMode,
+    measurements: MeasurementSet,
+    seed: u64,
+) -> Experiment {
+    let mut exp = table2_experiment(setup, mode, measurements, seed);
+    exp.true_wear[mode.wear_index() - idx::W_R] *= 5.0;
     exp.random_walk_rel *= 5.0;
     exp.prediction_points = vec![6.0, 10.0, 14.0];
     exp.prmse_skip_cycles = 4;
@@ -968,7 +981,7 @@ pub fn table3_experiment(setup: &ValveSetup, seed: u64) -> Experiment {
         truth_noise: SensorNoise::default(),
         truth_substep: TRUTH_SUBSTEP,
         asynchronous_commands: true,
-        travel_poll_dt: None,
+        travel_poll_dt: Some(TRAVEL_POLL_DT),
         convergence_cycles: 3,
         prmse_skip_cycles: 10,
         sensor_faults: SensorFaults::default(),
