@@ -1,6 +1,7 @@
 //! One valve prognostics experiment (N = 500), for tuning and timing:
 //! `cargo run --release -p prognos-sim --example valve_one -- <mode 0-4> <set 0-3> <seed>
-//! [truth step us] [filter step us] [asynchronous 0/1] [discrete noise /100] [walk /1e-5] [damage walk /100]`.
+//! [truth step us] [filter step us] [asynchronous 0/1] [discrete noise /100] [walk /1e-5] [damage walk /100]
+//! [travel poll of the discrete sensors, ms; 0 = one reading per 0.1 s sample]`.
 
 use prognos_core::plants::valve::{DamageMode, MeasurementSet};
 use prognos_sim::valve::{ValveSetup, run_experiment, table2_experiment};
@@ -24,6 +25,9 @@ fn main() {
         );
     }
     let mut exp = table2_experiment(&setup, mode, set, seed);
+    if let Some(p) = args.get(9) {
+        exp.travel_poll_dt = (*p > 0).then_some(*p as f64 * 1e-3);
+    }
     if let Some(w) = args.get(8) {
         // Optional damage random walk per cycle relative to one cycle's increment, in 1/100.
         exp.damage_walk_rel = *w as f64 * 0.01;

@@ -1,6 +1,7 @@
 //! The valve paper's Table 2 and Table 3 campaigns, printed beside the paper's numbers.
 //! `cargo run --release -p prognos-sim --example valve_tables -- table2 [runs] [seed]`
 //! `cargo run --release -p prognos-sim --example valve_tables -- table3 [seed]`
+//! `cargo run --release -p prognos-sim --example valve_tables -- table2-set <set 0-3> [runs] [seed] [mode 0-4, all if absent]`
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -14,6 +15,16 @@ fn main() {
             let result = prognos_sim::valve::table2(num(1, 5) as usize, num(2, 1));
             print!("{}", result.render());
         }
+        "table2-set" => {
+            // Table 2's cells of one measurement set (optionally one mode), same seeds.
+            use prognos_core::plants::valve::{DamageMode, MeasurementSet};
+            let set = MeasurementSet::ALL[num(1, 3) as usize];
+            let mode = args.get(4).map(|_| DamageMode::ALL[num(4, 0) as usize]);
+            let result = prognos_sim::valve::table2_cells(num(2, 5) as usize, num(3, 1), |m, s| {
+                s == set && mode.is_none_or(|only| only == m)
+            });
+            print!("{}", result.render());
+        }
         "table3" => {
             let result = prognos_sim::valve::table3(num(1, 1));
             print!("{}", result.render());
@@ -21,7 +32,12 @@ fn main() {
         "table3-diag" => {
             // Table 3 (N = 2000), printing every estimated wear every `step` cycles.
             let setup = prognos_sim::valve::ValveSetup::new();
-            let exp = prognos_sim::valve::table3_experiment(&setup, num(1, 1));
+            let mut exp = prognos_sim::valve::table3_experiment(&setup, num(1, 1));
+            if let Some(ms) = args.get(3) {
+                // Optional travel poll of the discrete sensors in ms (0: one reading per sample).
+                let ms: f64 = ms.parse().expect("number");
+                exp.travel_poll_dt = (ms > 0.0).then_some(ms * 1e-3);
+            }
             let run = prognos_sim::valve::run_experiment::<2000>(&setup, &exp);
             let step = num(2, 5) as usize;
             for (mode, est) in exp.estimated.iter().zip(&run.estimate_per_cycle) {
@@ -40,10 +56,11 @@ fn main() {
             }
             for p in &run.predictions {
                 println!(
-                    "t_P {:5.1} RUL* {:5.1} median {:5.1}",
-                    p.t_p, p.true_rul, p.median_rul
+                    "t_P {:5.1} RUL* {:5.2} median {:5.2} RA {:6.2} p01 {:5.2}",
+                    p.t_p, p.true_rul, p.median_rul, p.ra, p.lower_99
                 );
             }
+            println!("{:.1} s", run.seconds);
         }
         other => {
             eprintln!("unknown table `{other}` (table2 or table3)");

@@ -2,10 +2,12 @@
 //! shortcuts, with sensors; joint state-parameter estimation with the core SIR particle filter,
 //! EOL/RUL prediction in cycles, and the Table 2 / Table 3 campaigns.
 //!
-//! Speed scheme (see `docs/deviations.md`): the filter samples every 0.1 s and its model
-//! sub-steps at 0.01 s with friction implicit; a particle resting at a stop with settled
-//! chambers is fast-forwarded (only the time-driven leak areas grow); prediction advances
-//! each particle a whole cycle at a time with tabulated cycle work (`DamageRateTable`).
+//! Speed scheme (see `docs/deviations.md`): the filter samples every 0.1 s (`{open, closed}`
+//! in Tables 2 and 3: every 10 ms while the valve travels, `Experiment::travel_poll_dt`) and
+//! its model sub-steps at 0.01 s with friction implicit; a particle resting at a stop with
+//! settled chambers is fast-forwarded (only the time-driven leak areas grow); prediction
+//! advances each particle a whole cycle at a time with tabulated cycle work
+//! (`DamageRateTable`).
 
 use crate::lockstep::InjectedFaults;
 use crate::scenario::SensorFaults;
@@ -29,6 +31,9 @@ pub const FLUID: [f64; 2] = [3.5e5, 2.0e5];
 pub const SAMPLE_DT: f64 = 0.1;
 /// Internal step of the truth plant [s]: the filter model's step (see `Experiment`).
 pub const TRUTH_SUBSTEP: f64 = 0.01;
+/// Poll period of the discrete sensors while the valve travels (`{open, closed}` in Tables 2
+/// and 3): the filter model's step.
+pub const TRAVEL_POLL_DT: f64 = 0.01;
 /// Samples per 30 s cycle.
 pub const SAMPLES_PER_CYCLE: usize = 300;
 
@@ -182,6 +187,12 @@ pub struct Experiment {
     /// filter, which splits that step). With synchronised commands a discrete sensor's
     /// switching time is quantised to the same 0.1 s bin for tens of cycles.
     pub asynchronous_commands: bool,
+    /// Poll period [s] of the discrete sensors while the valve travels (`{open, closed}` only):
+    /// from each command until the truth's sensor of the commanded stop reads 1, the sample
+    /// interval is split into polls of at most this length, each fused as an `{open, closed}`
+    /// reading (the wear and damage walks stay once per 0.1 s sample). `None`: one reading
+    /// per 0.1 s sample. Resolves the switching times to the poll instead of the sample.
+    pub travel_poll_dt: Option<f64>,
     /// Cycles over which the convergence metric C_w is computed.
     pub convergence_cycles: usize,
     /// Cycles ignored by PRMSE_w.
@@ -294,6 +305,12 @@ pub fn run_experiment_in<T: Real, const N: usize>(
         // Leaks grow in all 300 samples of a cycle, sliding damage in about 15 (motion).
         process_noise.leak_rel = exp.damage_walk_rel * (SAMPLES_PER_CYCLE as f64).sqrt();
         process_noise.sliding_rel = exp.damage_walk_rel * 15f64.sqrt();
+        if let Some(poll) = exp.travel_poll_dt.filter(|p| *p > 0.0 && *p < SAMPLE_DT)
+            && exp.measurements == MeasurementSet::Discrete
+        {
+            // All motion is polled: the same variance per sample from SAMPLE_DT / poll steps.
+            process_noise.sliding_rel *= (SAMPLE_DT / poll).sqrt();
+        }
     }
     let model = Valve::<T> {
         params: setup.params.cast_to(),
@@ -345,6 +362,13 @@ pub fn run_experiment_in<T: Real, const N: usize>(
         resample_threshold: cast(0.5),
         ..PfConfig::default()
     };
+    // The intermediate polls of `travel_poll_dt` move only the states, not the parameters.
+    let quiet_config = PfConfig {
+        random_walk_std: SVector::zeros(),
+        ..config
+    };
+    let discrete = exp.measurements == MeasurementSet::Discrete;
+    let mut travelling = false;
     let x0 = setup.params.nominal_state(6000.0, 48000.0, [0.0; 5]);
     let mut pf =
         Box::new(ParticleFilter::<T, NX, N>::new(x0.map(to_t), config).expect("valid config"));
@@ -423,8 +447,36 @@ pub fn run_experiment_in<T: Real, const N: usize>(
                     dt -= lead;
                 }
             }
+            if k == 0 || k == SAMPLES_PER_CYCLE / 2 {
+                travelling = true;
+            }
+            if let Some(poll) = exp.travel_poll_dt.filter(|_| travelling && discrete)
+                && poll > 0.0
+                && poll < dt
+            {
+                // All but the last poll of the sample here (without the parameter walks);
+                // the last one is the sample itself below.
+                let polls = (dt / poll).ceil();
+                let h = dt / polls;
+                pf.set_config(quiet_config).expect("valid config");
+                for _ in 1..(polls as usize) {
+                    truth.advance(&u, h);
+                    let [.., open, closed] = truth.params.outputs(&truth.state, &u);
+                    let _ = pf.step(
+                        &model,
+                        &u_t,
+                        Some(&[to_t(open), to_t(closed)]),
+                        to_t(h),
+                        &mut rng,
+                    );
+                    travelling &= !commanded_stop_reached(k, open, closed);
+                }
+                pf.set_config(config).expect("valid config");
+                dt = h;
+            }
             truth.advance(&u, dt);
             let outputs = truth.measure(&u, &mut rng).map(to_t);
+            travelling &= !commanded_stop_reached(k, outputs[4].as_f64(), outputs[5].as_f64());
             let (mut y, n) = model.select(&outputs);
             let mut sample: Vec<f64> = y[..n].iter().map(|v| v.as_f64()).collect();
             injector.apply(
@@ -546,6 +598,15 @@ pub fn run_experiment_in<T: Real, const N: usize>(
         rejected_samples,
         injected: injector.counts,
         seconds: started.elapsed().as_secs_f64(),
+    }
+}
+
+/// Whether the discrete sensor of the stop commanded at sample `k` of a cycle reads 1.
+fn commanded_stop_reached(k: usize, open: f64, closed: f64) -> bool {
+    if k < SAMPLES_PER_CYCLE / 2 {
+        open > 0.5
+    } else {
+        closed > 0.5
     }
 }
 
@@ -742,6 +803,7 @@ pub fn table2_experiment(
         truth_noise: SensorNoise::default(),
         truth_substep: TRUTH_SUBSTEP,
         asynchronous_commands: true,
+        travel_poll_dt: (measurements == MeasurementSet::Discrete).then_some(TRAVEL_POLL_DT),
         convergence_cycles: 3,
         prmse_skip_cycles: 10,
         sensor_faults: SensorFaults::default(),
@@ -754,8 +816,19 @@ pub fn table2_experiment(
 /// kept: the wear's order of magnitude did not change, the rate did), predictions at cycles
 /// 6, 10 and 14.
 pub fn fast_bottom_leak_experiment(setup: &ValveSetup, seed: u64) -> Experiment {
-    let mut exp = table2_experiment(setup, DamageMode::BottomLeak, MeasurementSet::All, seed);
-    exp.true_wear[4] *= 5.0;
+    fast_experiment(setup, DamageMode::BottomLeak, MeasurementSet::All, seed)
+}
+
+/// [`fast_bottom_leak_experiment`] for any fault and sensor set: Table 2's experiment with
+/// the wear five times faster (EOL near 20 cycles), predictions at cycles 6, 10 and 14.
+pub fn fast_experiment(
+    setup: &ValveSetup,
+    mode: DamageMode,
+    measurements: MeasurementSet,
+    seed: u64,
+) -> Experiment {
+    let mut exp = table2_experiment(setup, mode, measurements, seed);
+    exp.true_wear[mode.wear_index() - idx::W_R] *= 5.0;
     exp.random_walk_rel *= 5.0;
     exp.prediction_points = vec![6.0, 10.0, 14.0];
     exp.prmse_skip_cycles = 4;
@@ -764,11 +837,23 @@ pub fn fast_bottom_leak_experiment(setup: &ValveSetup, seed: u64) -> Experiment 
 
 /// Reproduces Table 2: 5 faults x 4 sensor sets x `runs` runs, N = 500, in parallel.
 pub fn table2(runs: usize, seed: u64) -> Table2Result {
+    table2_cells(runs, seed, |_, _| true)
+}
+
+/// The cells of Table 2 that `selected` picks (same seeds as in the whole table).
+pub fn table2_cells(
+    runs: usize,
+    seed: u64,
+    selected: impl Fn(DamageMode, MeasurementSet) -> bool,
+) -> Table2Result {
     let started = std::time::Instant::now();
     let setup = ValveSetup::new();
     let mut jobs = Vec::new();
     for (mi, mode) in DamageMode::ALL.iter().enumerate() {
         for (si, set) in MeasurementSet::ALL.iter().enumerate() {
+            if !selected(*mode, *set) {
+                continue;
+            }
             for run in 0..runs {
                 let s = seed
                     .wrapping_mul(0x9E37_79B9_7F4A_7C15)
@@ -789,6 +874,9 @@ pub fn table2(runs: usize, seed: u64) -> Table2Result {
                 .filter(|(a, b, _)| *a == mi && *b == si)
                 .map(|(_, _, r)| r)
                 .collect();
+            if rs.is_empty() {
+                continue;
+            }
             cells.push(Table2Cell {
                 mode: *mode,
                 measurements: *set,
@@ -814,8 +902,16 @@ impl Table2Result {
         let mut out = String::from(
             "fault                 M              PRMSE_w (paper)  RMAD_w (paper)   C_w (paper)     RA (paper)      RMAD_RUL (paper)  EOL\n",
         );
-        for (i, c) in self.cells.iter().enumerate() {
-            let p = PAPER_TABLE2[i / 4][i % 4];
+        for c in &self.cells {
+            let mi = DamageMode::ALL
+                .iter()
+                .position(|m| *m == c.mode)
+                .unwrap_or(0);
+            let si = MeasurementSet::ALL
+                .iter()
+                .position(|m| *m == c.measurements)
+                .unwrap_or(0);
+            let p = PAPER_TABLE2[mi][si];
             out.push_str(&format!(
                 "{:<21} {:<14} {:6.2} ({:5.2})  {:6.2} ({:5.2})  {:6.2} ({:5.2})  {:6.2} ({:5.2})  {:6.2} ({:5.2})  {:5.1}\n",
                 c.mode.name(),
@@ -885,6 +981,7 @@ pub fn table3_experiment(setup: &ValveSetup, seed: u64) -> Experiment {
         truth_noise: SensorNoise::default(),
         truth_substep: TRUTH_SUBSTEP,
         asynchronous_commands: true,
+        travel_poll_dt: Some(TRAVEL_POLL_DT),
         convergence_cycles: 3,
         prmse_skip_cycles: 10,
         sensor_faults: SensorFaults::default(),

@@ -55,3 +55,38 @@ fn interpolated_eol_is_the_continuous_threshold_crossing() {
         assert!(p.ra >= 80.0, "{p:?}");
     }
 }
+
+/// The spring seen only through `{open, closed}` (wear five times faster, EOL near 20
+/// cycles, 200 particles): polling the discrete sensors every 10 ms while the valve travels
+/// (`travel_poll_dt`, the default for `{open, closed}`) resolves the switching times that
+/// one reading per 0.1 s sample quantises, and the wear error falls by more than half
+/// (seed 11: PRMSE_w 0.56 polled, 2.46 sampled; the whole-cycle RULs are exact in both).
+#[test]
+fn travel_polling_resolves_the_spring_from_discrete_sensors() {
+    use prognos_core::plants::valve::{DamageMode, MeasurementSet};
+    let setup = ValveSetup::new();
+    let polled = prognos_sim::valve::fast_experiment(
+        &setup,
+        DamageMode::Spring,
+        MeasurementSet::Discrete,
+        11,
+    );
+    assert!(polled.travel_poll_dt.is_some());
+    let mut sampled = polled.clone();
+    sampled.travel_poll_dt = None;
+    let polled = run_experiment::<200>(&setup, &polled);
+    let sampled = run_experiment::<200>(&setup, &sampled);
+    assert_eq!(polled.predictions.len(), 3, "{:?}", polled.predictions);
+    for p in &polled.predictions {
+        assert!(
+            (p.median_rul - p.true_rul).abs() <= 0.1 * p.true_rul,
+            "{p:?}"
+        );
+    }
+    let (polled, sampled) = (polled.prmse_w[0], sampled.prmse_w[0]);
+    assert!(polled < 1.5, "polled PRMSE_w {polled}");
+    assert!(
+        polled < 0.5 * sampled,
+        "PRMSE_w polled {polled}, sampled {sampled}"
+    );
+}
