@@ -582,8 +582,12 @@ pub struct Step2Settings {
     /// Relative noise the loss filters assume: the measurement noise plus the effect of the
     /// temperature-estimate error on `exp(-b/T)` (`b sigma_T / T^2`, ~0.8 % for 0.2 degC).
     pub assumed_noise: f64,
-    /// Random walk per interval of `b` (degC) and `beta` (1e-6 mL/s).
+    /// Random walk per interval of `b` (degC) and `beta` (1e-6 mL/s) of the one-step PF.
     pub walk: (f64, f64),
+    /// The same for the two-step PF; `beta`'s walk over its prior mean is also the level walk
+    /// that sets how many readings the ratio filter conditions on (about 1 / sqrt(walk^2 /
+    /// noise^2), about 35 intervals here).
+    pub two_step_walk: (f64, f64),
     /// Prior mean and std of `b` and of `beta` (1e-6 mL/s).
     pub prior_b: (f64, f64),
     /// Prior of beta.
@@ -615,6 +619,7 @@ impl Step2Settings {
             relative_noise: 0.0025,
             assumed_noise: 0.01,
             walk: (0.1, 0.01),
+            two_step_walk: (0.05, 0.002),
             prior_b: (35.0, 8.0),
             prior_beta: (7.0, 1.5),
             burn_in: 5,
@@ -690,12 +695,7 @@ impl LossEstimators {
         use prognos_core::plants::reaction_wheel::LossJointModel;
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0xB0B0_1234);
         let two_step = TwoStepLoss::new(
-            TwoStepConfig {
-                relative_noise: s.assumed_noise,
-                walk: s.walk,
-                prior_b: s.prior_b,
-                prior_beta: s.prior_beta,
-            },
+            TwoStepConfig::new(s.assumed_noise, s.two_step_walk, s.prior_b, s.prior_beta),
             &mut rng,
         )
         .ok()?;
@@ -1074,6 +1074,7 @@ impl Step3Settings {
         step2.thermometer.gap_spread = 2.0;
         // Thousands of intervals: a slower walk (the adaptive spreading handles the fault).
         step2.walk = (0.02, 0.002);
+        step2.two_step_walk = step2.walk;
         // 4-s bursts with 32 particles err by a few tenths of a degree.
         step2.temperature_std = 0.2;
         step2.kalman_walk = (0.004, 0.0001);
@@ -1456,6 +1457,33 @@ mod tests {
         let mut s = Step1Settings::new(method, WheelSensors::HIGH_NOISE);
         s.duration = 150.0;
         s
+    }
+
+    #[test]
+    fn two_step_pf_stays_within_two_percent_on_table6_runs() {
+        // Four fresh-seed Table 6 runs per scenario (seeds 7000-7003: about 1.1 % for b and
+        // 1.2 % for beta; the two-step PF with white ratio noise made 4.5-8 %).
+        let settings = Step2Settings::new(Method::Apf);
+        for scenario in [
+            FaultScenario::ExcessiveLoss,
+            FaultScenario::InsufficientInjection,
+        ] {
+            let (mut b, mut beta, mut one_step_b) = (0.0, 0.0, 0.0);
+            for seed in 7000..7004 {
+                let o = run_step2(&settings, scenario, seed);
+                b += o.two_step_rmspe.0 / 4.0;
+                beta += o.two_step_rmspe.1 / 4.0;
+                one_step_b += o.one_step_rmspe.0 / 4.0;
+            }
+            assert!(
+                b < 2.0 && beta < 2.0,
+                "{scenario:?}: b {b:.2} %, beta {beta:.2} %"
+            );
+            assert!(
+                one_step_b > b,
+                "{scenario:?}: one-step b {one_step_b:.2} % vs {b:.2} %"
+            );
+        }
     }
 
     #[test]

@@ -26,6 +26,7 @@ use crate::error::Error;
 use crate::model::Stochastic;
 use crate::random::standard_normal;
 use crate::real::{Real, cast, zero_vector};
+use crate::safeguard::Flags;
 use nalgebra::SVector;
 use rand_core::Rng;
 
@@ -243,6 +244,15 @@ impl<T: Real, const NX: usize, const N: usize> AdaptiveFilter<T, NX, N> {
             self.reset_history();
         }
         Ok(out)
+    }
+
+    /// Treats the particles as confused now (a change known from elsewhere): resamples,
+    /// spreads them by `spread_std` and forgets the likelihood history.
+    pub fn declare_change<R: Rng + ?Sized>(&mut self, rng: &mut R) -> Flags {
+        let flags = self.filter.resample(rng);
+        self.spread(rng);
+        self.reset_history();
+        flags
     }
 
     /// The logistic weight mutation (Eq. 20 as read in the module docs).

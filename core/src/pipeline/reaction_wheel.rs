@@ -204,12 +204,12 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             config.temperature_filter,
         )?;
         self.two_step.reset(
-            TwoStepConfig {
-                relative_noise: config.loss_relative_noise,
-                walk: config.loss_walk,
-                prior_b: config.prior_b,
-                prior_beta: config.prior_beta,
-            },
+            TwoStepConfig::new(
+                config.loss_relative_noise,
+                config.loss_walk,
+                config.prior_b,
+                config.prior_beta,
+            ),
             rng,
         )?;
         self.config = config;

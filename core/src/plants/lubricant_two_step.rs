@@ -4,11 +4,17 @@
 //!
 //! One implementation for the on-board pipeline (`pipeline::ReactionWheel`) and the host's
 //! Table 6/7 reproductions. Both filters use the adaptive resampling of section 3.1.1.
+//!
+//! Consecutive ratios share a reading, so the first filter scores each ratio conditional on
+//! the earlier ones ([`LossRatioModel`]); without that the ratios, treated as white noise,
+//! lose most of what the levels say about `b` (their sum telescopes to one level
+//! difference) and count each reading's noise twice. See `docs/deviations.md`.
 
 use super::reaction_wheel::{BETA_UNIT, IntervalExposure, LossRateModel, LossRatioModel};
 use crate::Error;
 use crate::filter::adaptive::{AdaptiveConfig, AdaptiveFilter, Method};
 use crate::filter::particle::PfConfig;
+use crate::model::Stochastic;
 use crate::real::{Real, cast};
 use crate::safeguard::Flags;
 use nalgebra::SVector;
@@ -25,6 +31,13 @@ pub struct TwoStepConfig<T> {
     pub prior_b: (T, T),
     /// Prior mean and std of beta (1e-6 mL/s).
     pub prior_beta: (T, T),
+    /// Spread of b (degC) and beta (1e-6 mL/s) when a filter is confused (a change).
+    pub change_spread: (T, T),
+    /// Relative change of the consumption level (of `beta`) that the ratio which confused the
+    /// first filter may contain when it is scored again on the spread particles.
+    pub level_change: T,
+    /// Adaptive resampling's `p_eff` and judging window (section 3.1.1) of both filters.
+    pub confusion: (T, u32),
 }
 
 impl<T: Real> TwoStepConfig<T> {
@@ -34,26 +47,53 @@ impl<T: Real> TwoStepConfig<T> {
         walk: (T::ZERO, T::ZERO),
         prior_b: (T::ZERO, T::ZERO),
         prior_beta: (T::ZERO, T::ZERO),
+        change_spread: (T::ZERO, T::ZERO),
+        level_change: T::ZERO,
+        confusion: (T::ZERO, 0),
     };
+
+    /// The given noise, walks and priors with the default change handling: a confused
+    /// filter is judged at every interval (`p_eff` 1e-3, 3.7 sigma for the best particle) and
+    /// spread by 10 degC in `b` (the Kalman filter's enhancement) and 0.4e-6 mL/s in `beta`;
+    /// the confusing ratio may hold a 20 % level change (Table 4's faults change `beta` by
+    /// 7 %; 10 % attributed too much of the jump to `b`, docs/results.md).
+    pub fn new(relative_noise: T, walk: (T, T), prior_b: (T, T), prior_beta: (T, T)) -> Self {
+        Self {
+            relative_noise,
+            walk,
+            prior_b,
+            prior_beta,
+            change_spread: (cast(10.0), cast(0.4)),
+            level_change: cast(0.2),
+            confusion: (cast(1e-3), 1),
+        }
+    }
 }
 
-fn loss_config<T: Real>(walk: T, lower: T, upper: T) -> PfConfig<T, 1> {
+fn loss_config<T: Real, const NX: usize>(
+    walk: SVector<T, NX>,
+    lower: SVector<T, NX>,
+    upper: SVector<T, NX>,
+) -> PfConfig<T, NX> {
     PfConfig {
-        random_walk_std: SVector::from([walk]),
-        lower: SVector::from([lower]),
-        upper: SVector::from([upper]),
+        random_walk_std: walk,
+        lower,
+        upper,
         ..PfConfig::default()
     }
 }
 
 /// Adaptive resampling with a spread of `spread` when the filter is confused (a change).
-fn loss_adaptive<T: Real>(spread: T) -> AdaptiveConfig<T, 1> {
+fn loss_adaptive<T: Real, const NX: usize>(
+    spread: SVector<T, NX>,
+    (likelihood_threshold, min_window): (T, u32),
+) -> AdaptiveConfig<T, NX> {
     AdaptiveConfig {
         method: Method::AdaptiveResampling,
         ess_threshold: cast(0.5),
-        likelihood_threshold: cast(0.05),
-        min_window: 3,
-        spread_std: SVector::from([spread]),
+        likelihood_threshold,
+        min_window,
+        spread_std: spread,
         improvement_offset: T::zero(),
         improvement_ess: T::one(),
     }
@@ -63,17 +103,38 @@ fn loss_adaptive<T: Real>(spread: T) -> AdaptiveConfig<T, 1> {
 #[derive(Clone, Debug)]
 pub struct TwoStepLoss<T: Real, const M: usize> {
     relative_noise: T,
-    ratio: AdaptiveFilter<T, 1, M>,
+    /// Relative random walk of the consumption level per interval (`beta`'s walk over its
+    /// prior mean): how fast the ratio filter forgets the readings it conditions on.
+    level_walk: T,
+    level_change: T,
+    /// Variance of the previous reading's noise given the ratios so far (the same for every
+    /// particle; the estimates are the ratio filter's second state entry).
+    carried_variance: T,
+    /// `[b (degC), estimated ln integral + noise of the previous reading]`.
+    ratio: AdaptiveFilter<T, 2, M>,
+    /// `beta` given `b = conditioned_b`.
     rate: AdaptiveFilter<T, 1, M>,
-    previous: Option<(IntervalExposure<T>, T)>,
+    /// The `b` the rate filter's particles are conditioned on (the ratio filter's last mean).
+    conditioned_b: Option<T>,
+    /// Mean `1/T` of the intervals so far: where `beta` given `b` is held fixed when `b` moves.
+    reference_inverse_temperature: T,
+    intervals: u32,
+    /// The previous interval's consumption (mL), if usable.
+    previous: Option<T>,
 }
 
 impl<T: Real, const M: usize> TwoStepLoss<T, M> {
     /// An all-zero placeholder for static storage: [`TwoStepLoss::reset`] it before use.
     pub const UNSET: Self = Self {
         relative_noise: T::ZERO,
+        level_walk: T::ZERO,
+        level_change: T::ZERO,
+        carried_variance: T::ZERO,
         ratio: AdaptiveFilter::UNSET,
         rate: AdaptiveFilter::UNSET,
+        conditioned_b: None,
+        reference_inverse_temperature: T::ZERO,
+        intervals: 0,
         previous: None,
     };
 
@@ -93,20 +154,40 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         if !(config.relative_noise.finite() && config.relative_noise > T::zero()) {
             return Err(Error::InvalidParameter("relative_noise"));
         }
+        if !(config.level_change.finite() && config.level_change >= T::zero()) {
+            return Err(Error::InvalidParameter("level_change"));
+        }
         let (b0, bs) = config.prior_b;
         let (beta0, betas) = config.prior_beta;
+        if !(beta0.finite() && beta0 > T::zero()) {
+            return Err(Error::InvalidParameter("prior_beta"));
+        }
+        let unbounded = T::MAX_FINITE;
         self.ratio.reset(
-            SVector::from([b0]),
-            loss_config(config.walk.0, T::zero(), cast(150.0)),
-            loss_adaptive(cast(4.0)),
+            SVector::from([b0, T::zero()]),
+            loss_config(
+                SVector::from([config.walk.0, T::zero()]),
+                SVector::from([T::zero(), -unbounded]),
+                SVector::from([cast(150.0), unbounded]),
+            ),
+            loss_adaptive(
+                SVector::from([config.change_spread.0, T::zero()]),
+                config.confusion,
+            ),
         )?;
-        self.ratio
-            .filter_mut()
-            .init_gaussian(&SVector::from([b0]), &SVector::from([bs]), rng)?;
+        self.ratio.filter_mut().init_gaussian(
+            &SVector::from([b0, T::zero()]),
+            &SVector::from([bs, T::zero()]),
+            rng,
+        )?;
         self.rate.reset(
             SVector::from([beta0]),
-            loss_config(config.walk.1, cast(0.01), cast(100.0)),
-            loss_adaptive(cast(0.4)),
+            loss_config(
+                SVector::from([config.walk.1]),
+                SVector::from([cast::<T>(0.01)]),
+                SVector::from([cast::<T>(100.0)]),
+            ),
+            loss_adaptive(SVector::from([config.change_spread.1]), config.confusion),
         )?;
         self.rate.filter_mut().init_gaussian(
             &SVector::from([beta0]),
@@ -114,8 +195,78 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
             rng,
         )?;
         self.relative_noise = config.relative_noise;
+        self.level_walk = config.walk.1 / beta0;
+        self.level_change = config.level_change;
+        self.carried_variance = config.relative_noise * config.relative_noise;
+        self.conditioned_b = None;
+        self.reference_inverse_temperature = T::zero();
+        self.intervals = 0;
         self.previous = None;
         Ok(())
+    }
+
+    /// The next ratio is scored as if only this interval's reading were known (its noise has
+    /// the full variance): at the start and after a rejected interval.
+    fn forget_readings(&mut self, now: &IntervalExposure<T>) {
+        self.carried_variance = self.relative_noise * self.relative_noise;
+        for p in self.ratio.filter_mut().particles_mut().iter_mut() {
+            p.y = LossRatioModel::log_integral(p.x, now).unwrap_or(T::zero());
+        }
+    }
+
+    /// The ratio filter's step on `ln(consumption / previous)`, then the carried estimates.
+    /// Also says whether the filter was confused (a change declared).
+    fn update_ratio<R: Rng + ?Sized>(
+        &mut self,
+        now: &IntervalExposure<T>,
+        log_ratio: T,
+        rng: &mut R,
+    ) -> (Flags, bool) {
+        let reading_variance = self.relative_noise * self.relative_noise;
+        let mut innovation_variance =
+            reading_variance + self.level_walk * self.level_walk + self.carried_variance;
+        let u = now.as_input();
+        let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, innovation_variance]);
+        let step = self.ratio.step(
+            &LossRatioModel,
+            &u4,
+            Some(&[log_ratio.exp()]),
+            T::one(),
+            T::zero(),
+            rng,
+        );
+        match step {
+            Ok(report) if report.filter.fused => {
+                if report.spread {
+                    // A change: score the ratio that revealed it again on the spread
+                    // particles, allowing it a level (beta) change as well as b's.
+                    innovation_variance += self.level_change * self.level_change;
+                    let model = LossRatioModel;
+                    let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, innovation_variance]);
+                    let ratio = [log_ratio.exp()];
+                    self.ratio.filter_mut().reweight(|p, log_weight| {
+                        log_weight + model.log_likelihood(p, &u4, &ratio)
+                    });
+                }
+                let gain = reading_variance / innovation_variance;
+                for p in self.ratio.filter_mut().particles_mut().iter_mut() {
+                    if let Some(log_integral) = LossRatioModel::log_integral(p.x, now) {
+                        p.y = LossRatioModel::carry(p.y, log_ratio, log_integral, gain);
+                    }
+                }
+                self.carried_variance = reading_variance * (T::one() - gain);
+                (Flags::NONE, report.spread)
+            }
+            // The ratio was not used: the earlier readings no longer bear on the next one.
+            Ok(_) => {
+                self.forget_readings(now);
+                (Flags::NONE, false)
+            }
+            Err(_) => {
+                self.forget_readings(now);
+                (Flags::MEASUREMENT_REJECTED, false)
+            }
+        }
     }
 
     /// One interval: its temperature exposure and measured consumption (mL). A rejected
@@ -130,22 +281,33 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         let noise = self.relative_noise;
         let one = T::one();
         let u = exposure.as_input();
-        if let Some((before, previous_consumption)) = self.previous {
-            let bu = before.as_input();
-            let u6 = SVector::<T, 6>::from([u.x, u.y, u.z, bu.x, bu.y, bu.z]);
-            let ratio = consumption / previous_consumption;
-            let model = LossRatioModel {
-                relative_noise: noise,
-            };
-            if self
-                .ratio
-                .step(&model, &u6, Some(&[ratio]), one, T::zero(), rng)
-                .is_err()
-            {
-                flags.insert(Flags::MEASUREMENT_REJECTED);
+        let usable = consumption.finite() && consumption > T::zero();
+        let mut changed = false;
+        match self.previous {
+            Some(previous) if usable => {
+                let log_ratio = (consumption / previous).ln();
+                let (ratio_flags, spread) = self.update_ratio(&exposure, log_ratio, rng);
+                flags.insert(ratio_flags);
+                changed = spread;
             }
+            _ if usable => self.forget_readings(&exposure),
+            _ => {}
         }
         let b_hat = self.ratio.filter().mean().x;
+        if changed {
+            // The ratio filter explained the change by b at an unchanged level: beta given the
+            // new b starts from its old value, spread, and the reference restarts here.
+            self.conditioned_b = None;
+            self.intervals = 0;
+            flags.insert(self.rate.declare_change(rng));
+        }
+        if usable && exposure.mean_inverse_temperature.finite() {
+            self.intervals = self.intervals.saturating_add(1);
+            let n: T = cast(f64::from(self.intervals));
+            self.reference_inverse_temperature +=
+                (exposure.mean_inverse_temperature - self.reference_inverse_temperature) / n;
+        }
+        self.condition_rate_on(b_hat);
         let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, b_hat]);
         let model = LossRateModel {
             relative_noise: noise,
@@ -157,8 +319,25 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         {
             flags.insert(Flags::MEASUREMENT_REJECTED);
         }
-        self.previous = Some((exposure, consumption));
+        self.previous = usable.then_some(consumption);
         flags
+    }
+
+    /// Moves the rate filter's particles from `beta` given the previous `b` to `beta` given
+    /// `b`, keeping the consumption at the reference temperature: Eq. 34's `beta` is
+    /// conditional on `b`, and the two are strongly correlated through the levels
+    /// (`ln beta = ln rate(T) + b / T`).
+    fn condition_rate_on(&mut self, b: T) {
+        if let Some(before) = self.conditioned_b {
+            let factor = ((b - before) * self.reference_inverse_temperature).exp();
+            let (lower, upper) = (cast::<T>(0.01), cast::<T>(100.0));
+            if factor.finite() {
+                for p in self.rate.filter_mut().particles_mut().iter_mut() {
+                    p.x = (p.x * factor).max(lower).min(upper);
+                }
+            }
+        }
+        self.conditioned_b = Some(b);
     }
 
     /// Estimates `(b in degC, beta in mL/s)`.
@@ -170,10 +349,13 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
     }
 
     /// Particle `i` as `(b in degC, beta in 1e-6 mL/s, weight)`: the two filters' particles
-    /// paired by index (independent after resampling), weight the product of theirs.
+    /// paired by index (independent after resampling), weight the product of theirs; `beta`
+    /// is moved to the paired `b` as in [`TwoStepLoss::condition_rate_on`].
     pub fn particle(&self, i: usize) -> Option<(T, T, T)> {
         let b = self.ratio.filter().particles().get(i)?.x;
-        let beta = self.rate.filter().particles().get(i)?.x;
+        let conditioned = self.conditioned_b.unwrap_or(b);
+        let beta = self.rate.filter().particles().get(i)?.x
+            * ((b - conditioned) * self.reference_inverse_temperature).exp();
         Some((
             b,
             beta,
@@ -196,12 +378,7 @@ mod tests {
     #[test]
     fn learns_b_and_beta_from_exact_intervals_and_rejects_bad_noise() {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
-        let config = TwoStepConfig {
-            relative_noise: 0.01,
-            walk: (0.1, 0.01),
-            prior_b: (35.0, 8.0),
-            prior_beta: (7.0, 1.5),
-        };
+        let config = TwoStepConfig::new(0.01, (0.1, 0.01), (35.0, 8.0), (7.0, 1.5));
         let mut bad = config;
         bad.relative_noise = f64::NAN;
         assert!(TwoStepLoss::<f64, 200>::new(bad, &mut rng).is_err());

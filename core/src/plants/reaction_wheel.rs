@@ -694,38 +694,63 @@ impl<T: Real> Stochastic<T, 2, 3> for LossJointModel<T> {
     }
 }
 
-/// First PF of the two-step scheme (Eqs. 31-33): state `[b]`, input the exposures of the
-/// current and the previous interval `[mean_k, var_k, dur_k, mean_k-1, var_k-1, dur_k-1]`,
-/// measurement the consumption ratio `y_k / y_k-1`, which does not depend on `beta`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LossRatioModel<T> {
-    /// Relative noise of one consumption measurement (the ratio has sqrt(2) times it).
-    pub relative_noise: T,
+/// First PF of the two-step scheme (Eqs. 31-33) on the log ratio of consecutive interval
+/// consumptions, `ln(y_k / y_k-1)`, which does not depend on `beta`.
+///
+/// Consecutive ratios share a reading, so their noise `e_k - e_k-1` is MA(1), not white. The
+/// state is `[b, c]`, where `c` is the particle's estimate of the previous reading's log
+/// consumption without `beta`, `ln integral_k-1(b_k-1) + e_k-1`, given the ratios so far along
+/// its `b` path (a scalar Kalman filter per particle, [`LossRatioModel::carry`], whose variance
+/// is common to all). Each ratio is scored conditional on the earlier ones: mean
+/// `ln integral_k(b) - c`, variance `S_k`. Input `[mean(1/T), var(1/T), duration, S_k]` of
+/// the current interval.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LossRatioModel;
+
+impl LossRatioModel {
+    /// `ln integral(b)` of the interval (`None` if not positive and finite).
+    #[inline]
+    pub fn log_integral<T: Real>(b: T, exposure: &IntervalExposure<T>) -> Option<T> {
+        let integral = exposure.integral(b);
+        (integral.finite() && integral > T::zero()).then(|| integral.ln())
+    }
+
+    /// The carried estimate after the ratio with innovation `log_ratio - log_integral + c`:
+    /// a scalar Kalman update of the current reading's noise with gain
+    /// `reading_variance / S_k`.
+    #[inline]
+    pub fn carry<T: Real>(carried: T, log_ratio: T, log_integral: T, gain: T) -> T {
+        log_integral + gain * (log_ratio - log_integral + carried)
+    }
 }
 
-impl<T: Real> Model<T, 1, 6> for LossRatioModel<T> {
-    fn step(&self, x: &SVector<T, 1>, _u: &SVector<T, 6>, _dt: T) -> SVector<T, 1> {
+impl<T: Real> Model<T, 2, 4> for LossRatioModel {
+    fn step(&self, x: &SVector<T, 2>, _u: &SVector<T, 4>, _dt: T) -> SVector<T, 2> {
         *x
     }
 }
 
-impl<T: Real> Stochastic<T, 1, 6> for LossRatioModel<T> {
+impl<T: Real> Stochastic<T, 2, 4> for LossRatioModel {
     fn measurement_len(&self) -> usize {
         1
     }
-    fn log_likelihood(&self, x: &SVector<T, 1>, u: &SVector<T, 6>, y: &[T]) -> T {
+    fn log_likelihood(&self, x: &SVector<T, 2>, u: &SVector<T, 4>, y: &[T]) -> T {
+        let floor = T::min_value().unwrap_or(-T::MAX_FINITE);
         let Some(log_ratio) = consumption_log(y) else {
-            return T::min_value().unwrap_or(-T::MAX_FINITE);
+            return floor;
         };
-        let b = x.x;
-        let &[m0, v0, d0, m1, v1, d1] = u.as_slice() else {
-            return T::min_value().unwrap_or(-T::MAX_FINITE);
+        let innovation_variance = u.w;
+        if !(innovation_variance > T::zero()) {
+            return floor;
+        }
+        let Some(log_integral) = Self::log_integral(x.x, &exposure_from(u.x, u.y, u.z)) else {
+            return floor;
         };
-        let now = exposure_from(m0, v0, d0);
-        let before = exposure_from(m1, v1, d1);
-        let predicted = now.integral(b).ln() - before.integral(b).ln();
-        let sigma = self.relative_noise * cast::<T>(2.0).sqrt();
-        gaussian_log_likelihood(&[log_ratio], &[predicted], &[sigma])
+        gaussian_log_likelihood(
+            &[log_ratio],
+            &[log_integral - x.y],
+            &[innovation_variance.sqrt()],
+        )
     }
 }
 
