@@ -42,17 +42,23 @@ fn write(dir: &Path, d: &Dataset) -> PathBuf {
     csv
 }
 
+/// Writes `d` into `dir`, runs `prognos gap` on it into `dir/out`, and parses the verdict.
+fn diagnose(dir: &Path, d: &Dataset) -> (PathBuf, serde_json::Value) {
+    let csv = write(dir, d);
+    let out = dir.join("out");
+    let o = prognos(&["gap", "--data", s(&csv), "--out", s(&out)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let verdict =
+        serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
+    (out, verdict)
+}
+
 #[test]
 fn gap_finds_lubricant_torque_noise_in_wheel_data_and_writes_the_report() {
     let dir = scratch("wheel");
     let d = one("reaction_wheel", "lubricant_torque_noise", 4.0);
     assert_eq!(d.label.channel.as_deref(), Some("y:speed"));
-    let csv = write(&dir, &d);
-    let out = dir.join("out");
-    let o = prognos(&["gap", "--data", s(&csv), "--out", s(&out)]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let verdict: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
+    let (out, verdict) = diagnose(&dir, &d);
     assert_eq!(verdict["plant"], "reaction_wheel");
     assert_eq!(verdict["verdict"], "lubricant_torque_noise");
     assert_eq!(verdict["where"]["channel"], "y:speed");
@@ -115,12 +121,7 @@ fn scooter_noise_is_estimated_from_the_residual_and_the_shrink_is_measured() {
     // gap below the noise (shrink 0). The model's residual gives the sensors' own level.
     let dir = scratch("scooter-noise");
     let d = one("scooter", "rear_coulomb_friction", 2.0);
-    let csv = write(&dir, &d);
-    let out = dir.join("out");
-    let o = prognos(&["gap", "--data", s(&csv), "--out", s(&out)]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let verdict: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
+    let (_, verdict) = diagnose(&dir, &d);
     let truth = [1e-3, 1e-4, 1e-3];
     for (level, want) in verdict["noise"].as_array().unwrap().iter().zip(truth) {
         let got = level["std"].as_f64().unwrap();
