@@ -6,6 +6,7 @@
 use prognos_core::learn::ar::{
     ArModel, OrivConfig, WindowCheck, best_order, combined_order, identify,
 };
+use prognos_sim::edge_cloud::PAPER_TABLE1_PH_MIN;
 use prognos_sim::edge_cloud::bearing::load_bearing;
 use std::path::PathBuf;
 
@@ -29,14 +30,7 @@ macro_rules! criteria {
 
 fn main() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/pronostia");
-    for name in [
-        "Bearing1_1",
-        "Bearing1_2",
-        "Bearing2_1",
-        "Bearing2_2",
-        "Bearing3_1",
-        "Bearing3_2",
-    ] {
+    for (name, _) in PAPER_TABLE1_PH_MIN {
         let record = load_bearing(&root.join(format!("{name}.csv"))).expect("bearing file");
         let mut picks = Vec::new();
         for start in [150usize, 200, 250, 300, 350] {

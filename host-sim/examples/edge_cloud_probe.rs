@@ -11,18 +11,10 @@ use prognos_core::health::symmetric_itakura_saito;
 use prognos_core::learn::ar::ArModel;
 use prognos_sim::edge_cloud::bearing::{BearingRecord, load_bearing};
 use prognos_sim::edge_cloud::cloud::{CloudPrognoser, ORDER};
-use prognos_sim::edge_cloud::{Channel, EdgeCloudConfig, run_edge};
+use prognos_sim::edge_cloud::{Channel, EdgeCloudConfig, PAPER_TABLE1_PH_MIN, run_edge};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-const BEARINGS: [&str; 6] = [
-    "Bearing1_1",
-    "Bearing1_2",
-    "Bearing2_1",
-    "Bearing2_2",
-    "Bearing3_1",
-    "Bearing3_2",
-];
 /// Models between the lagging reference and the current model (30 min).
 const LAG_MODELS: usize = 180;
 
@@ -204,7 +196,7 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     let mut last = None;
-    for name in BEARINGS {
+    for (name, _) in PAPER_TABLE1_PH_MIN {
         let record = load_bearing(&root.join(format!("{name}.csv"))).expect("bearing file");
         let p = probe(&record);
         write_csv(&out.join(format!("{name}.csv")), &p);

@@ -2,18 +2,8 @@
 //! prognostic horizon beside the paper's Table 1:
 //! `cargo run --release -p prognos-sim --example edge_cloud_table [-- CONFIG.toml]`.
 
-use prognos_sim::edge_cloud::{EdgeCloudConfig, run_bearing};
+use prognos_sim::edge_cloud::{EdgeCloudConfig, PAPER_TABLE1_PH_MIN, run_bearing};
 use std::path::PathBuf;
-
-/// Table 1 of Barbieri et al. (2021), PH in minutes, alpha = 0.2.
-const PAPER: [(&str, f64); 6] = [
-    ("Bearing1_1", 136.5),
-    ("Bearing1_2", 2.0),
-    ("Bearing2_1", 3.5),
-    ("Bearing2_2", 2.17),
-    ("Bearing3_1", 1.17),
-    ("Bearing3_2", 20.0),
-];
 
 fn main() {
     let config = match std::env::args().nth(1) {
@@ -32,7 +22,7 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|---|");
     let mut rate = None;
-    for (name, paper) in PAPER {
+    for (name, paper) in PAPER_TABLE1_PH_MIN {
         let path = root.join(format!("{name}.csv"));
         match run_bearing(&path, &config) {
             Ok((run, _)) => {

@@ -5,17 +5,8 @@
 //! how many bearings meet each target.
 
 use prognos_sim::edge_cloud::bearing::load_bearing;
-use prognos_sim::edge_cloud::{EdgeCloudConfig, run_cloud, run_edge};
+use prognos_sim::edge_cloud::{EdgeCloudConfig, PAPER_TABLE1_PH_MIN, run_cloud, run_edge};
 use std::path::PathBuf;
-
-const PAPER: [(&str, f64); 6] = [
-    ("Bearing1_1", 136.5),
-    ("Bearing1_2", 2.0),
-    ("Bearing2_1", 3.5),
-    ("Bearing2_2", 2.17),
-    ("Bearing3_1", 1.17),
-    ("Bearing3_2", 20.0),
-];
 
 fn settings(base: &EdgeCloudConfig) -> Vec<(String, EdgeCloudConfig)> {
     let mut out = vec![("default".to_string(), base.clone())];
@@ -51,7 +42,7 @@ fn settings(base: &EdgeCloudConfig) -> Vec<(String, EdgeCloudConfig)> {
 fn main() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/pronostia");
     let base = EdgeCloudConfig::default();
-    let data: Vec<_> = PAPER
+    let data: Vec<_> = PAPER_TABLE1_PH_MIN
         .iter()
         .map(|(name, paper)| {
             let record = load_bearing(&root.join(format!("{name}.csv"))).expect("bearing file");

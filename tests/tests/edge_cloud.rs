@@ -5,7 +5,9 @@ use prognos_core::filter::particle::{ParticleFilter, PfConfig};
 use prognos_core::health::{DegradationStage, PiecewiseHiModel, StageInput};
 use prognos_core::random::{normal, uniform01};
 use prognos_sim::edge_cloud::bearing::{load_bearing, parse_bearing};
-use prognos_sim::edge_cloud::{EdgeCloudConfig, EdgeCloudError, analyse_bearing, run_bearing};
+use prognos_sim::edge_cloud::{
+    EdgeCloudConfig, EdgeCloudError, PAPER_TABLE1_PH_MIN, analyse_bearing, run_bearing,
+};
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::path::{Path, PathBuf};
@@ -341,17 +343,9 @@ fn cli_entry_returns_2_on_a_truncated_file() {
 #[test]
 #[ignore]
 fn six_bearings_prognostic_horizon_against_table_1() {
-    let table = [
-        ("Bearing1_1", 136.5),
-        ("Bearing1_2", 2.0),
-        ("Bearing2_1", 3.5),
-        ("Bearing2_2", 2.17),
-        ("Bearing3_1", 1.17),
-        ("Bearing3_2", 20.0),
-    ];
     let config = EdgeCloudConfig::default();
     let mut meets = Vec::new();
-    for (name, paper_min) in table {
+    for (name, paper_min) in PAPER_TABLE1_PH_MIN {
         let record = load_bearing(&data(&format!("{name}.csv"))).unwrap();
         let run = analyse_bearing(&record, &config).unwrap();
         let ph_min = run.summary.prognostic_horizon_s.unwrap_or(0.0) / 60.0;

@@ -19,6 +19,17 @@ use prognos_core::pipeline::edge::{EdgeConfig, EdgeMonitor};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+/// The six PRONOSTIA learning bearings (`data/pronostia/<name>.csv`) with Table 1 of
+/// Barbieri et al. (2021): prognostic horizon in minutes, alpha = 0.2.
+pub const PAPER_TABLE1_PH_MIN: [(&str, f64); 6] = [
+    ("Bearing1_1", 136.5),
+    ("Bearing1_2", 2.0),
+    ("Bearing2_1", 3.5),
+    ("Bearing2_2", 2.17),
+    ("Bearing3_1", 1.17),
+    ("Bearing3_2", 20.0),
+];
+
 /// Snapshots in the edge buffer (12 x 0.1 s).
 pub const BUFFER_SNAPSHOTS: usize = 12;
 
