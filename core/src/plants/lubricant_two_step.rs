@@ -33,8 +33,8 @@ pub struct TwoStepConfig<T> {
     pub prior_beta: (T, T),
     /// Spread of b (degC) and beta (1e-6 mL/s) when a filter is confused (a change).
     pub change_spread: (T, T),
-    /// Relative change of the consumption level (of `beta`) that the ratio which confused the
-    /// first filter may contain when it is scored again on the spread particles.
+    /// Relative change of the consumption level (of `beta`) that the ratio bridging a declared
+    /// change may contain.
     pub level_change: T,
     /// Adaptive resampling's `p_eff` and judging window (section 3.1.1) of both filters.
     pub confusion: (T, u32),
@@ -69,6 +69,9 @@ impl<T: Real> TwoStepConfig<T> {
         }
     }
 }
+
+/// Most consecutive readings a ratio bridges over after declared changes.
+const MAX_BRIDGED: u32 = 2;
 
 fn loss_config<T: Real, const NX: usize>(
     walk: SVector<T, NX>,
@@ -121,6 +124,11 @@ pub struct TwoStepLoss<T: Real, const M: usize> {
     intervals: u32,
     /// The previous interval's consumption (mL), if usable.
     previous: Option<T>,
+    /// Readings skipped since the one the ratios continue from: a reading at which a change
+    /// was declared may mix the old and the new parameters, so the next ratio bridges over it.
+    bridged: u32,
+    /// Mean and std of `beta` before the declared change the ratios are bridging over.
+    beta_before_change: (T, T),
 }
 
 impl<T: Real, const M: usize> TwoStepLoss<T, M> {
@@ -136,6 +144,8 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         reference_inverse_temperature: T::ZERO,
         intervals: 0,
         previous: None,
+        bridged: 0,
+        beta_before_change: (T::ZERO, T::ZERO),
     };
 
     /// Filters with particles drawn from the priors (`b` first, then `beta`).
@@ -202,6 +212,8 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         self.reference_inverse_temperature = T::zero();
         self.intervals = 0;
         self.previous = None;
+        self.bridged = 0;
+        self.beta_before_change = (T::zero(), T::zero());
         Ok(())
     }
 
@@ -209,13 +221,15 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
     /// the full variance): at the start and after a rejected interval.
     fn forget_readings(&mut self, now: &IntervalExposure<T>) {
         self.carried_variance = self.relative_noise * self.relative_noise;
+        self.bridged = 0;
         for p in self.ratio.filter_mut().particles_mut().iter_mut() {
             p.y = LossRatioModel::log_integral(p.x, now).unwrap_or(T::zero());
         }
     }
 
     /// The ratio filter's step on `ln(consumption / previous)`, then the carried estimates.
-    /// Also says whether the filter was confused (a change declared).
+    /// Also says whether the filter was confused (a change declared); then nothing is carried
+    /// and the next ratio bridges over this reading.
     fn update_ratio<R: Rng + ?Sized>(
         &mut self,
         now: &IntervalExposure<T>,
@@ -223,8 +237,19 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         rng: &mut R,
     ) -> (Flags, bool) {
         let reading_variance = self.relative_noise * self.relative_noise;
+        let level_walk_variance = self.level_walk * self.level_walk;
         let mut innovation_variance =
-            reading_variance + self.level_walk * self.level_walk + self.carried_variance;
+            reading_variance + level_walk_variance + self.carried_variance;
+        if self.bridged > 0 {
+            // Across a declared change: the skipped intervals' level walk and a level (beta)
+            // change as well as b's.
+            let skipped: T = cast(f64::from(self.bridged));
+            innovation_variance +=
+                skipped * level_walk_variance + self.level_change * self.level_change;
+            // Undo the re-scoring of the ratio that declared the change: this ratio, over
+            // the same earlier reading, carries its information.
+            self.ratio.filter_mut().reweight(|_, _| T::zero());
+        }
         let u = now.as_input();
         let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, innovation_variance]);
         let step = self.ratio.step(
@@ -236,18 +261,27 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
             rng,
         );
         match step {
-            Ok(report) if report.filter.fused => {
-                if report.spread {
-                    // A change: score the ratio that revealed it again on the spread
-                    // particles, allowing it a level (beta) change as well as b's.
-                    innovation_variance += self.level_change * self.level_change;
-                    let model = LossRatioModel;
-                    let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, innovation_variance]);
-                    let ratio = [log_ratio.exp()];
-                    self.ratio.filter_mut().reweight(|p, log_weight| {
-                        log_weight + model.log_likelihood(p, &u4, &ratio)
-                    });
+            Ok(report) if report.filter.fused && report.spread => {
+                if self.bridged >= MAX_BRIDGED {
+                    // Confused again and again: start afresh from this reading.
+                    self.forget_readings(now);
+                    return (Flags::NONE, false);
                 }
+                // For this interval's estimate only (undone at the next ratio): the ratio
+                // scored again on the spread particles, allowing a level change as well as b's.
+                if self.bridged == 0 {
+                    innovation_variance += self.level_change * self.level_change;
+                }
+                let model = LossRatioModel;
+                let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, innovation_variance]);
+                let ratio = [log_ratio.exp()];
+                self.ratio
+                    .filter_mut()
+                    .reweight(|p, log_weight| log_weight + model.log_likelihood(p, &u4, &ratio));
+                self.bridged += 1;
+                (Flags::NONE, true)
+            }
+            Ok(report) if report.filter.fused => {
                 let gain = reading_variance / innovation_variance;
                 for p in self.ratio.filter_mut().particles_mut().iter_mut() {
                     if let Some(log_integral) = LossRatioModel::log_integral(p.x, now) {
@@ -255,7 +289,8 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
                     }
                 }
                 self.carried_variance = reading_variance * (T::one() - gain);
-                (Flags::NONE, report.spread)
+                self.bridged = 0;
+                (Flags::NONE, false)
             }
             // The ratio was not used: the earlier readings no longer bear on the next one.
             Ok(_) => {
@@ -278,13 +313,13 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         rng: &mut R,
     ) -> Flags {
         let mut flags = Flags::NONE;
-        let noise = self.relative_noise;
-        let one = T::one();
         let u = exposure.as_input();
         let usable = consumption.finite() && consumption > T::zero();
         let mut changed = false;
+        let mut bridged_over = false;
         match self.previous {
             Some(previous) if usable => {
+                bridged_over = self.bridged > 0;
                 let log_ratio = (consumption / previous).ln();
                 let (ratio_flags, spread) = self.update_ratio(&exposure, log_ratio, rng);
                 flags.insert(ratio_flags);
@@ -295,11 +330,32 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         }
         let b_hat = self.ratio.filter().mean().x;
         if changed {
-            // The ratio filter explained the change by b at an unchanged level: beta given the
-            // new b starts from its old value, spread, and the reference restarts here.
+            // The ratio filter was spread in b at an unchanged level: beta given the new b
+            // starts from its old value, spread, and the reference restarts here.
+            if !bridged_over {
+                let rate = self.rate.filter();
+                self.beta_before_change =
+                    (rate.mean().x, rate.covariance().x.max(T::zero()).sqrt());
+            }
             self.conditioned_b = None;
             self.intervals = 0;
             flags.insert(self.rate.declare_change(rng));
+        } else if bridged_over {
+            // The reading bridged over may mix the old and the new parameters: beta given b
+            // restarts from before the change and the reference from here.
+            let (mean, std) = self.beta_before_change;
+            let spread = self.rate.config().spread_std.x;
+            let std = (std * std + spread * spread).sqrt();
+            if self
+                .rate
+                .filter_mut()
+                .init_gaussian(&SVector::from([mean]), &SVector::from([std]), rng)
+                .is_ok()
+            {
+                self.rate.reset_history();
+                self.conditioned_b = None;
+                self.intervals = 0;
+            }
         }
         if usable && exposure.mean_inverse_temperature.finite() {
             self.intervals = self.intervals.saturating_add(1);
@@ -310,16 +366,19 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         self.condition_rate_on(b_hat);
         let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, b_hat]);
         let model = LossRateModel {
-            relative_noise: noise,
+            relative_noise: self.relative_noise,
         };
         if self
             .rate
-            .step(&model, &u4, Some(&[consumption]), one, T::zero(), rng)
+            .step(&model, &u4, Some(&[consumption]), T::one(), T::zero(), rng)
             .is_err()
         {
             flags.insert(Flags::MEASUREMENT_REJECTED);
         }
-        self.previous = usable.then_some(consumption);
+        if !changed {
+            // After a change `previous` stays: the next ratio bridges over this reading.
+            self.previous = usable.then_some(consumption);
+        }
         flags
     }
 
@@ -396,5 +455,43 @@ mod tests {
         let total: f64 = filter.particles().map(|p| p.2).sum();
         assert_eq!(filter.particles().count(), 200);
         assert!(total > 0.0 && total.is_finite());
+    }
+
+    /// A change in the last quarter of an interval: that reading mixes the old and the new
+    /// parameters. The ratios bridge over it, so `b` and `beta` settle on the new values
+    /// without the overshoot of a second declared change.
+    #[test]
+    fn recovers_from_a_change_inside_an_interval_without_overshoot() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(21);
+        let config = TwoStepConfig::new(0.01, (0.05, 0.002), (35.0, 8.0), (7.0, 1.5));
+        let mut filter = TwoStepLoss::<f64, 500>::new(config, &mut rng).unwrap();
+        let (old, new) = ((37.0, 7.494e-6), (49.0, 7.0e-6));
+        let exposure = |k: usize| {
+            let temp: f64 = 30.0 + 4.0 * (k as f64 * 0.26).sin();
+            IntervalExposure::constant(240.0, temp).unwrap()
+        };
+        let mut worst_b_after = 0.0f64;
+        for k in 0..90 {
+            let e = exposure(k);
+            let y = match k {
+                0..40 => e.consumption(old.0, old.1),
+                40 => 0.75 * e.consumption(old.0, old.1) + 0.25 * e.consumption(new.0, new.1),
+                _ => e.consumption(new.0, new.1),
+            };
+            let flags = filter.update(e, y, &mut rng);
+            assert!(!flags.contains(Flags::MEASUREMENT_REJECTED));
+            let (b, beta) = filter.parameters();
+            assert!(b.is_finite() && beta.is_finite());
+            if k == 39 {
+                assert!((b - old.0).abs() / old.0 < 0.05, "b before the change {b}");
+            }
+            if k >= 43 {
+                worst_b_after = worst_b_after.max((b - new.0).abs() / new.0);
+            }
+        }
+        let (b, beta) = filter.parameters();
+        assert!(worst_b_after < 0.1, "b after the change errs by up to {worst_b_after}");
+        assert!((b - new.0).abs() / new.0 < 0.03, "b {b}");
+        assert!((beta - new.1).abs() / new.1 < 0.05, "beta {beta}");
     }
 }
