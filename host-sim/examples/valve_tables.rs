@@ -1,6 +1,7 @@
 //! The valve paper's Table 2 and Table 3 campaigns, printed beside the paper's numbers.
 //! `cargo run --release -p prognos-sim --example valve_tables -- table2 [runs] [seed]`
 //! `cargo run --release -p prognos-sim --example valve_tables -- table3 [seed]`
+//! `cargo run --release -p prognos-sim --example valve_tables -- table3-diag [seed] [step] [poll ms] [damage-noise decay cycles, 0: constant]`
 //! `cargo run --release -p prognos-sim --example valve_tables -- table2-set <set 0-3> [runs] [seed] [mode 0-4, all if absent]`
 
 fn main() {
@@ -38,6 +39,11 @@ fn main() {
                 let ms: f64 = ms.parse().expect("number");
                 exp.travel_poll_dt = (ms > 0.0).then_some(ms * 1e-3);
             }
+            if let Some(t0) = args.get(4) {
+                // Optional damage-noise decay constant in cycles (0: constant noise).
+                let t0: f64 = t0.parse().expect("number");
+                exp.damage_noise_decay_cycles = (t0 > 0.0).then_some(t0);
+            }
             let run = prognos_sim::valve::run_experiment::<2000>(&setup, &exp);
             let step = num(2, 5) as usize;
             for (mode, est) in exp.estimated.iter().zip(&run.estimate_per_cycle) {
@@ -53,6 +59,21 @@ fn main() {
                     .map(|e| format!("{:.3}", e / scale))
                     .collect();
                 println!("{:>22} (/ {:.3e}): {}", mode.name(), scale, v.join(" "));
+            }
+            // Damage error of the modes with true wear, in cycles of their true increment.
+            for (k, mode) in exp.estimated.iter().enumerate() {
+                let w = exp.true_wear[mode.wear_index() - 9];
+                if w <= 0.0 {
+                    continue;
+                }
+                let per_cycle = w * setup.table.work_at(*mode, 0.0);
+                let v: Vec<String> = run.damage_estimate_per_cycle[k]
+                    .iter()
+                    .zip(&run.true_damage_per_cycle[k])
+                    .step_by(step)
+                    .map(|(e, t)| format!("{:+.2}", (e - t) / per_cycle))
+                    .collect();
+                println!("{:>22} damage error (cycles): {}", mode.name(), v.join(" "));
             }
             for p in &run.predictions {
                 println!(

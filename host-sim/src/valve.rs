@@ -16,7 +16,7 @@ use prognos_core::filter::particle::{ParticleFilter, PfConfig};
 use prognos_core::metrics;
 use prognos_core::plants::valve::{
     CycleRateModel, DamageMode, DamageRateTable, DamageThresholds, MeasurementSet, NU, NX,
-    PROGPY_THRESHOLDS, Requirements, SensorNoise, Valve, ValveParams, idx,
+    PROGPY_THRESHOLDS, ProcessNoise, Requirements, SensorNoise, Valve, ValveParams, idx,
 };
 use prognos_core::prognose::{PredictionSettings, predict_eol, rul_distribution};
 use prognos_core::random::{standard_normal, uniform01};
@@ -175,6 +175,12 @@ pub struct Experiment {
     /// for a mode that progresses at the reference rate (Table 3, where most modes are
     /// inactive and an additive walk would let their damage wander).
     pub multiplicative_damage_noise: bool,
+    /// With `multiplicative_damage_noise`: the damage noise's standard deviation at cycle t is
+    /// scaled by `1 / sqrt(1 + t / t0)` with this `t0` [cycles]. The noise stands in for the
+    /// wear's uncertainty while it converges, which shrinks like one over the square root of
+    /// the data seen; a constant noise keeps letting the damage follow the data while the
+    /// wear is off (Table 3). `None`: constant.
+    pub damage_noise_decay_cycles: Option<f64>,
     /// Filter's assumed sensor noise.
     pub filter_noise: SensorNoise<f64>,
     /// Truth sensor noise.
@@ -300,7 +306,7 @@ pub fn run_experiment_in<T: Real, const N: usize>(
     let mut phase_rng = Xoshiro256PlusPlus::seed_from_u64(exp.seed ^ 0x5DEE_CE66_D1CE_4E5B);
     let mut truth = TruthValve::new(exp.true_wear, exp.truth_noise);
     truth.params.max_substep = exp.truth_substep;
-    let mut process_noise = prognos_core::plants::valve::ProcessNoise::default();
+    let mut process_noise = ProcessNoise::<f64>::default();
     if exp.multiplicative_damage_noise {
         // Leaks grow in all 300 samples of a cycle, sliding damage in about 15 (motion).
         process_noise.leak_rel = exp.damage_walk_rel * (SAMPLES_PER_CYCLE as f64).sqrt();
@@ -312,7 +318,7 @@ pub fn run_experiment_in<T: Real, const N: usize>(
             process_noise.sliding_rel *= (SAMPLE_DT / poll).sqrt();
         }
     }
-    let model = Valve::<T> {
+    let mut model = Valve::<T> {
         params: setup.params.cast_to(),
         measurements: exp.measurements,
         sensor_noise: exp.filter_noise.cast_to(),
@@ -419,6 +425,15 @@ pub fn run_experiment_in<T: Real, const N: usize>(
             break 'cycles;
         }
         cycle_start_state = truth.state;
+        if let Some(t0) = exp.damage_noise_decay_cycles.filter(|t0| *t0 > 0.0) {
+            let scale = 1.0 / (1.0 + cycle as f64 / t0).sqrt();
+            model.process_noise = ProcessNoise {
+                sliding_rel: process_noise.sliding_rel * scale,
+                leak_rel: process_noise.leak_rel * scale,
+                ..process_noise
+            }
+            .cast_to();
+        }
         for k in 0..SAMPLES_PER_CYCLE {
             let t_cycles = cycle as f64 + k as f64 / SAMPLES_PER_CYCLE as f64;
             // Predictions due at this time use the posterior up to now.
@@ -795,6 +810,7 @@ pub fn table2_experiment(
         prior_active_probability: None,
         interpolated_eol: false,
         multiplicative_damage_noise: false,
+        damage_noise_decay_cycles: None,
         measurements,
         prediction_points: (1..10).map(|c| 10.0 * c as f64).collect(),
         random_walk_rel: 2e-4,
@@ -973,6 +989,10 @@ pub fn table3_experiment(setup: &ValveSetup, seed: u64) -> Experiment {
         // RUL* as small as 3 cycles: whole-cycle EOLs would quantise RA in steps of 33 %.
         interpolated_eol: true,
         multiplicative_damage_noise: true,
+        // Full damage noise over the wear's first cycles of convergence (the C_w window), then
+        // shrinking as the wear estimate settles, so that late in life the wear must explain
+        // the data.
+        damage_noise_decay_cycles: Some(3.0),
         measurements: MeasurementSet::Discrete,
         prediction_points: PAPER_TABLE3.iter().map(|r| r[0]).collect(),
         random_walk_rel: 2e-4,
