@@ -490,7 +490,10 @@ mod tests {
             }
         }
         let (b, beta) = filter.parameters();
-        assert!(worst_b_after < 0.1, "b after the change errs by up to {worst_b_after}");
+        assert!(
+            worst_b_after < 0.1,
+            "b after the change errs by up to {worst_b_after}"
+        );
         assert!((b - new.0).abs() / new.0 < 0.03, "b {b}");
         assert!((beta - new.1).abs() / new.1 < 0.05, "beta {beta}");
     }
