@@ -278,7 +278,7 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
                 self.ratio
                     .filter_mut()
                     .reweight(|p, log_weight| log_weight + model.log_likelihood(p, &u4, &ratio));
-                self.bridged += 1;
+                self.bridged = self.bridged.saturating_add(1);
                 (Flags::NONE, true)
             }
             Ok(report) if report.filter.fused => {
