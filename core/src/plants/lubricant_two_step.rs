@@ -458,8 +458,11 @@ mod tests {
     }
 
     /// A change in the last quarter of an interval: that reading mixes the old and the new
-    /// parameters. The ratios bridge over it, so `b` and `beta` settle on the new values
-    /// without the overshoot of a second declared change.
+    /// parameters, and `b` and `beta` must still settle on the new values within 10 % from the
+    /// third interval on. With exact readings the code before the bridging passes this too; the
+    /// double declaration the bridging removes needs noisy temperatures and is checked on
+    /// Table 6 runs (`reaction_wheel::tests::two_step_pf_stays_within_two_percent_on_table6_runs`
+    /// in prognos-sim, seed 7011).
     #[test]
     fn recovers_from_a_change_inside_an_interval_without_overshoot() {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(21);
