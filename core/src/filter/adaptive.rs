@@ -181,6 +181,15 @@ impl<T: Real, const NX: usize, const N: usize> AdaptiveFilter<T, NX, N> {
         &self.config
     }
 
+    /// Copies `other`'s whole state into `self` in place (see
+    /// [`ParticleFilter::copy_state_from`]).
+    pub fn copy_state_from(&mut self, other: &Self) {
+        self.filter.copy_state_from(&other.filter);
+        self.config = other.config;
+        self.likelihood_sum = other.likelihood_sum;
+        self.likelihood_count = other.likelihood_count;
+    }
+
     /// Forgets the likelihood history (call after re-initialising the particles).
     pub fn reset_history(&mut self) {
         self.likelihood_sum = T::zero();

@@ -571,6 +571,39 @@ impl<T: Real, const NX: usize, const N: usize> ParticleFilter<T, NX, N> {
         true
     }
 
+    /// `ln sum_i w_i exp(f(particle_i))`: the log evidence of a measurement whose
+    /// log-likelihood under each particle is `f` (weights and particles unchanged). Computed in
+    /// one pass without a buffer; `-inf` (the type's lowest) when no term is finite.
+    pub fn log_expected_likelihood(&self, mut f: impl FnMut(&SVector<T, NX>) -> T) -> T {
+        let lowest = T::min_value().unwrap_or(-T::MAX_FINITE);
+        let (mut max, mut sum) = (lowest, T::zero());
+        for (p, lw) in self.particles.iter().zip(self.log_weights.iter()) {
+            let v = *lw + f(p);
+            if !v.finite() {
+                continue;
+            }
+            if v > max {
+                sum = sum * (max - v).exp() + T::one();
+                max = v;
+            } else {
+                sum += (v - max).exp();
+            }
+        }
+        if sum > T::zero() {
+            max + sum.ln()
+        } else {
+            lowest
+        }
+    }
+
+    /// Copies `other`'s particles, weights and configuration into `self` in place (a
+    /// snapshot that does not pass a whole filter through the stack).
+    pub fn copy_state_from(&mut self, other: &Self) {
+        self.particles.copy_from_slice(&other.particles);
+        self.log_weights.copy_from_slice(&other.log_weights);
+        self.config = other.config;
+    }
+
     /// Roughening: Gaussian jitter proportional to each entry's particle range.
     fn roughen<R: Rng + ?Sized>(&mut self, rng: &mut R) -> bool {
         if self.config.roughening.iter().all(|k| *k == T::zero()) {
@@ -641,4 +674,41 @@ fn clamp_into<T: Real, const NX: usize>(
         }
     }
     moved
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector1;
+    use rand_core::SeedableRng;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    #[test]
+    fn expected_likelihood_is_the_weighted_mean_and_copies_are_exact() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let mut filter =
+            ParticleFilter::<f64, 1, 64>::new(Vector1::new(0.0), PfConfig::default()).unwrap();
+        filter
+            .init_gaussian(&Vector1::new(1.0), &Vector1::new(2.0), &mut rng)
+            .unwrap();
+        assert!(filter.reweight(|p, lw| lw - 0.3 * p.x * p.x));
+        let f = |p: &Vector1<f64>| -0.5 * (p.x - 0.7) * (p.x - 0.7) - 400.0;
+        let direct: f64 = (0..64)
+            .map(|i| filter.weight(i) * f(&filter.particles()[i]).exp())
+            .sum();
+        let streamed = filter.log_expected_likelihood(f);
+        assert!(
+            (streamed - direct.ln()).abs() < 1e-12,
+            "{streamed} {}",
+            direct.ln()
+        );
+        assert_eq!(
+            filter.log_expected_likelihood(|_| f64::NEG_INFINITY),
+            f64::MIN
+        );
+        let mut copy = ParticleFilter::<f64, 1, 64>::UNSET;
+        copy.copy_state_from(&filter);
+        assert_eq!(copy.particles(), filter.particles());
+        assert_eq!(copy.log_weights(), filter.log_weights());
+    }
 }
