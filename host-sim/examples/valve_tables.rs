@@ -1,7 +1,7 @@
 //! The valve paper's Table 2 and Table 3 campaigns, printed beside the paper's numbers.
 //! `cargo run --release -p prognos-sim --example valve_tables -- table2 [runs] [seed]`
 //! `cargo run --release -p prognos-sim --example valve_tables -- table3 [seed]`
-//! `cargo run --release -p prognos-sim --example valve_tables -- table3-diag [seed] [step] [poll ms] [damage-noise decay cycles, 0: constant]`
+//! `cargo run --release -p prognos-sim --example valve_tables -- table3-diag [seed] [step] [poll ms] [damage-noise decay cycles, 0: constant] [joint EOL 0/1] [wear kernel 0/1]`
 //! `cargo run --release -p prognos-sim --example valve_tables -- table2-set <set 0-3> [runs] [seed] [mode 0-4, all if absent]`
 
 fn main() {
@@ -43,6 +43,14 @@ fn main() {
                 // Optional damage-noise decay constant in cycles (0: constant noise).
                 let t0: f64 = t0.parse().expect("number");
                 exp.damage_noise_decay_cycles = (t0 > 0.0).then_some(t0);
+            }
+            if let Some(flag) = args.get(5) {
+                // Optional: 0 turns the joint-requirement EOL off (per-mode thresholds).
+                exp.joint_requirement_eol = flag != "0";
+            }
+            if let Some(flag) = args.get(6) {
+                // Optional: 0 turns the once-per-cycle wear kernel move off.
+                exp.wear_kernel_move = flag != "0";
             }
             let run = prognos_sim::valve::run_experiment::<2000>(&setup, &exp);
             let step = num(2, 5) as usize;

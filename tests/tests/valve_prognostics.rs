@@ -90,3 +90,47 @@ fn travel_polling_resolves_the_spring_from_discrete_sensors() {
         "PRMSE_w polled {polled}, sampled {sampled}"
     );
 }
+
+/// The joint requirement check (`joint_requirement_eol`, Table 3) fails a valve with only the
+/// bottom leak damaged at that leak's threshold, as the threshold's own bisection does, and
+/// shows the interaction it exists for: a spring weakened by 2000 N/m (a tenth of the way to
+/// its own threshold) lets the valve with the leak just past its threshold open within 5 s
+/// (4.16 s, `valve_joint_probe`), and one weakened by 4000 N/m even with the leak one cycle
+/// of Table 3 growth (3.0e-7 m^2) past it (4.15 s).
+#[test]
+fn joint_requirement_check_matches_the_threshold_and_sees_the_spring() {
+    use prognos_core::plants::valve::idx;
+    use prognos_sim::valve::fails_jointly;
+    let setup = ValveSetup::new();
+    let th = setup.thresholds.a_eb_max;
+    let mut s = setup.params.nominal_state(6000.0, 48000.0, [0.0; 5]);
+    s[idx::A_EB] = th * (1.0 - 1e-3);
+    assert!(!fails_jointly(&setup, &s));
+    s[idx::A_EB] = th * (1.0 + 1e-3);
+    assert!(fails_jointly(&setup, &s));
+    s[idx::K] = 46000.0;
+    assert!(!fails_jointly(&setup, &s));
+    s[idx::A_EB] = th + 3.0e-7;
+    assert!(fails_jointly(&setup, &s));
+    s[idx::K] = 44000.0;
+    assert!(!fails_jointly(&setup, &s));
+}
+
+/// With one estimated mode the joint-requirement EOL is the per-mode threshold crossing: the
+/// fast bottom-leak run gives the same predictions with and without it (to the 1/16-cycle
+/// bisection and the 500-particle subsample).
+#[test]
+fn joint_requirement_eol_agrees_with_the_thresholds_for_one_mode() {
+    let setup = ValveSetup::new();
+    let mut exp = fast_bottom_leak_experiment(&setup, 7);
+    exp.interpolated_eol = true;
+    let per_mode = run_experiment::<200>(&setup, &exp);
+    exp.joint_requirement_eol = true;
+    let joint = run_experiment::<200>(&setup, &exp);
+    assert_eq!(per_mode.true_eol, joint.true_eol);
+    assert_eq!(per_mode.predictions.len(), joint.predictions.len());
+    for (a, b) in per_mode.predictions.iter().zip(&joint.predictions) {
+        assert!((a.median_rul - b.median_rul).abs() < 0.1, "{a:?} vs {b:?}");
+        assert!((a.lower_99 - b.lower_99).abs() < 0.2, "{a:?} vs {b:?}");
+    }
+}
