@@ -101,6 +101,9 @@ pub struct Diagnosis {
     /// Overlays for the report.
     #[serde(skip)]
     pub overlays: Vec<Overlay>,
+    /// Per channel: training RSS, count, held-out RSS, count of the user's model.
+    #[serde(skip)]
+    pub nominal_rss: Vec<[f64; 4]>,
 }
 
 /// Reads `data` and its meta file (beside it, or `meta`) and diagnoses.
@@ -377,6 +380,7 @@ pub fn diagnose_with(
         cells: report.cells.clone(),
         spectrum: report.spectrum.clone(),
         overlays,
+        nominal_rss: problem.rss_split(&problem.nominal),
     })
 }
 
@@ -564,9 +568,11 @@ pub fn decide(
     report: &WhereReport,
 ) -> (String, Vec<Evaluation>, Vec<Evaluation>) {
     let singles: Vec<Component> = problem.single_candidates();
+    // Every score is two-fold cross-validated (see [`Problem::fit_cv`]).
+    let other = problem.swapped();
     let mut evaluated: Vec<Evaluation> = singles
         .par_iter()
-        .filter_map(|c| problem.fit(std::slice::from_ref(c), None))
+        .filter_map(|c| problem.fit_cv(&other, std::slice::from_ref(c), None, None))
         .collect();
     evaluated.sort_by(|a, b| b.score.total_cmp(&a.score));
     let resolution = problem.gap_resolution();
@@ -595,6 +601,7 @@ pub fn decide(
     // jointly from their single fits (one coarse pass); the best few pairs are refined.
     let first = best.fitted[0].0.clone();
     let first_values = flat_values(&best);
+    let first_other = other_values(&best);
     let forward: Vec<Evaluation> = evaluated[1..]
         .par_iter()
         .filter(|e| {
@@ -604,24 +611,32 @@ pub fn decide(
         .filter_map(|e| {
             let mut start = first_values.clone();
             start.extend(flat_values(e));
-            problem.fit(&[first.clone(), e.fitted[0].0.clone()], Some(&start))
+            let mut start_other = first_other.clone();
+            start_other.extend(other_values(e));
+            problem.fit_cv(
+                &other,
+                &[first.clone(), e.fitted[0].0.clone()],
+                Some(&start),
+                Some(&start_other),
+            )
         })
         .collect();
     let mut forward = forward;
     forward.sort_by(|a, b| b.score.total_cmp(&a.score));
-    let pairs: Vec<(Vec<Component>, Vec<f64>)> = forward
+    let pairs: Vec<(Vec<Component>, Vec<f64>, Vec<f64>)> = forward
         .iter()
         .take(PAIR_POOL)
         .map(|e| {
             (
                 e.fitted.iter().map(|(c, _)| c.clone()).collect(),
                 flat_values(e),
+                other_values(e),
             )
         })
         .collect();
     let mut fitted_pairs: Vec<Evaluation> = pairs
         .par_iter()
-        .filter_map(|(c, s)| problem.fit(c, Some(s)))
+        .filter_map(|(c, s, so)| problem.fit_cv(&other, c, Some(s), Some(so)))
         .collect();
     fitted_pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
     if let Some(pair) = fitted_pairs.first()
@@ -635,6 +650,15 @@ pub fn decide(
         return (best.effect, evaluated, fitted_pairs);
     }
     ("unknown".into(), evaluated, fitted_pairs)
+}
+
+/// The second fold's fitted values (flattened as [`flat_values`]); empty when that fold
+/// was not fitted, which makes the fit start from its grid.
+fn other_values(e: &Evaluation) -> Vec<f64> {
+    e.other_fitted
+        .iter()
+        .flat_map(|(_, v)| v.iter().copied())
+        .collect()
 }
 
 fn overlays(problem: &Problem, report: &WhereReport, chosen: Option<&Evaluation>) -> Vec<Overlay> {
