@@ -568,11 +568,11 @@ pub fn decide(
     report: &WhereReport,
 ) -> (String, Vec<Evaluation>, Vec<Evaluation>) {
     let singles: Vec<Component> = problem.single_candidates();
-    // Every score is two-fold cross-validated (see [`Problem::fit_cv`]).
-    let other = problem.swapped();
+    // Single-fold score: `Problem::fit_cv` (two folds) was tried and was too slow to
+    // measure (docs/results.md, session 7).
     let mut evaluated: Vec<Evaluation> = singles
         .par_iter()
-        .filter_map(|c| problem.fit_cv(&other, std::slice::from_ref(c), None, None))
+        .filter_map(|c| problem.fit(std::slice::from_ref(c), None))
         .collect();
     evaluated.sort_by(|a, b| b.score.total_cmp(&a.score));
     let resolution = problem.gap_resolution();
@@ -601,7 +601,6 @@ pub fn decide(
     // jointly from their single fits (one coarse pass); the best few pairs are refined.
     let first = best.fitted[0].0.clone();
     let first_values = flat_values(&best);
-    let first_other = other_values(&best);
     let forward: Vec<Evaluation> = evaluated[1..]
         .par_iter()
         .filter(|e| {
@@ -611,32 +610,24 @@ pub fn decide(
         .filter_map(|e| {
             let mut start = first_values.clone();
             start.extend(flat_values(e));
-            let mut start_other = first_other.clone();
-            start_other.extend(other_values(e));
-            problem.fit_cv(
-                &other,
-                &[first.clone(), e.fitted[0].0.clone()],
-                Some(&start),
-                Some(&start_other),
-            )
+            problem.fit(&[first.clone(), e.fitted[0].0.clone()], Some(&start))
         })
         .collect();
     let mut forward = forward;
     forward.sort_by(|a, b| b.score.total_cmp(&a.score));
-    let pairs: Vec<(Vec<Component>, Vec<f64>, Vec<f64>)> = forward
+    let pairs: Vec<(Vec<Component>, Vec<f64>)> = forward
         .iter()
         .take(PAIR_POOL)
         .map(|e| {
             (
                 e.fitted.iter().map(|(c, _)| c.clone()).collect(),
                 flat_values(e),
-                other_values(e),
             )
         })
         .collect();
     let mut fitted_pairs: Vec<Evaluation> = pairs
         .par_iter()
-        .filter_map(|(c, s, so)| problem.fit_cv(&other, c, Some(s), Some(so)))
+        .filter_map(|(c, s)| problem.fit(c, Some(s)))
         .collect();
     fitted_pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
     if let Some(pair) = fitted_pairs.first()
@@ -650,15 +641,6 @@ pub fn decide(
         return (best.effect, evaluated, fitted_pairs);
     }
     ("unknown".into(), evaluated, fitted_pairs)
-}
-
-/// The second fold's fitted values (flattened as [`flat_values`]); empty when that fold
-/// was not fitted, which makes the fit start from its grid.
-fn other_values(e: &Evaluation) -> Vec<f64> {
-    e.other_fitted
-        .iter()
-        .flat_map(|(_, v)| v.iter().copied())
-        .collect()
 }
 
 fn overlays(problem: &Problem, report: &WhereReport, chosen: Option<&Evaluation>) -> Vec<Overlay> {

@@ -320,6 +320,7 @@ pub struct Evaluation {
     /// The score of each fold of [`Problem::fit_cv`]: fitted on the even blocks and scored
     /// on the odd ones, then the other way round (`score` is their mean; the second is NaN
     /// when only one fold was fitted).
+    #[serde(skip)]
     pub fold_scores: [f64; 2],
     /// The fitted values of the second fold (fitted on the odd blocks).
     #[serde(skip)]
