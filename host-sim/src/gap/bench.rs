@@ -89,6 +89,27 @@ pub struct Outcome {
     pub shrink: f64,
     /// Candidates the held-out data do not separate from the verdict.
     pub confusable: Vec<String>,
+    /// Every single and pair candidate, for offline study of the ranking (`bench.json`).
+    pub candidates: Vec<CandidateRecord>,
+    /// Noise std per channel used by the diagnosis.
+    pub sigma: Vec<f64>,
+    /// Per channel: training RSS, count, held-out RSS, count of the user's model.
+    pub nominal_rss: Vec<[f64; 4]>,
+}
+
+/// One fitted candidate as `bench.json` records it.
+#[derive(Clone, Debug, Serialize)]
+pub struct CandidateRecord {
+    /// Effect name.
+    pub effect: String,
+    /// Score (nats over the user's model).
+    pub score: f64,
+    /// Held-out gap before and after, shrink.
+    pub gap: [f64; 3],
+    /// Per channel: training RSS, count, held-out RSS, count.
+    pub rss: Vec<[f64; 4]>,
+    /// Score of each cross-validation fold.
+    pub folds: [f64; 2],
 }
 
 impl Outcome {
@@ -1128,6 +1149,20 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
         channel: diag.location.channel.clone(),
         shrink,
         confusable: diag.confusable.iter().map(|c| c.effect.clone()).collect(),
+        candidates: diag
+            .ranking
+            .iter()
+            .chain(&diag.pairs)
+            .map(|e| CandidateRecord {
+                effect: e.effect.clone(),
+                score: e.score,
+                gap: [e.gap_before, e.gap_after, e.shrink],
+                rss: e.channel_rss.clone(),
+                folds: e.fold_scores,
+            })
+            .collect(),
+        sigma: diag.noise.iter().map(|n| n.std).collect(),
+        nominal_rss: diag.nominal_rss.clone(),
     })
 }
 

@@ -101,6 +101,9 @@ pub struct Diagnosis {
     /// Overlays for the report.
     #[serde(skip)]
     pub overlays: Vec<Overlay>,
+    /// Per channel: training RSS, count, held-out RSS, count of the user's model.
+    #[serde(skip)]
+    pub nominal_rss: Vec<[f64; 4]>,
 }
 
 /// Reads `data` and its meta file (beside it, or `meta`) and diagnoses.
@@ -377,6 +380,7 @@ pub fn diagnose_with(
         cells: report.cells.clone(),
         spectrum: report.spectrum.clone(),
         overlays,
+        nominal_rss: problem.rss_split(&problem.nominal),
     })
 }
 
@@ -564,6 +568,8 @@ pub fn decide(
     report: &WhereReport,
 ) -> (String, Vec<Evaluation>, Vec<Evaluation>) {
     let singles: Vec<Component> = problem.single_candidates();
+    // Single-fold score: `Problem::fit_cv` (two folds) was tried and was too slow to
+    // measure (docs/results.md, session 7).
     let mut evaluated: Vec<Evaluation> = singles
         .par_iter()
         .filter_map(|c| problem.fit(std::slice::from_ref(c), None))
