@@ -108,8 +108,6 @@ pub struct CandidateRecord {
     pub gap: [f64; 3],
     /// Per channel: training RSS, count, held-out RSS, count.
     pub rss: Vec<[f64; 4]>,
-    /// Score of each cross-validation fold.
-    pub folds: [f64; 2],
 }
 
 impl Outcome {
@@ -1158,7 +1156,6 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
                 score: e.score,
                 gap: [e.gap_before, e.gap_after, e.shrink],
                 rss: e.channel_rss.clone(),
-                folds: e.fold_scores,
             })
             .collect(),
         sigma: diag.noise.iter().map(|n| n.std).collect(),

@@ -568,8 +568,8 @@ pub fn decide(
     report: &WhereReport,
 ) -> (String, Vec<Evaluation>, Vec<Evaluation>) {
     let singles: Vec<Component> = problem.single_candidates();
-    // Single-fold score: `Problem::fit_cv` (two folds) was tried and was too slow to
-    // measure (docs/results.md, session 7).
+    // Single-fold score: a two-fold cross-validated score was tried and was worse
+    // (docs/results.md, session 7; the code is in commit 2a72372).
     let mut evaluated: Vec<Evaluation> = singles
         .par_iter()
         .filter_map(|c| problem.fit(std::slice::from_ref(c), None))

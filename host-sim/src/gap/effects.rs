@@ -322,14 +322,6 @@ pub struct Evaluation {
     /// fitted replay (diagnostics for `gap-bench`'s `bench.json`).
     #[serde(skip)]
     pub channel_rss: Vec<[f64; 4]>,
-    /// The score of each fold of [`Problem::fit_cv`]: fitted on the even blocks and scored
-    /// on the odd ones, then the other way round (`score` is their mean; the second is NaN
-    /// when only one fold was fitted).
-    #[serde(skip)]
-    pub fold_scores: [f64; 2],
-    /// The fitted values of the second fold (fitted on the odd blocks).
-    #[serde(skip)]
-    pub other_fitted: Vec<(Component, Vec<f64>)>,
 }
 
 impl<'a> Problem<'a> {
@@ -785,65 +777,8 @@ impl<'a> Problem<'a> {
             absolute_score: absolute,
             batch_ll: self.held_out_batches(&sim),
             channel_rss: self.rss_split(&sim),
-            fold_scores: [absolute - nominal_score, f64::NAN],
-            other_fitted: Vec::new(),
             fitted,
         })
-    }
-
-    /// The same problem with the training and held-out blocks exchanged (the second fold of
-    /// [`Problem::fit_cv`]), the user's model's initial condition refitted on its training
-    /// blocks.
-    pub fn swapped(&self) -> Problem<'a> {
-        let mut p = Problem {
-            plant: self.plant,
-            data: self.data,
-            base: self.base.clone(),
-            sim_effects: self.sim_effects.clone(),
-            plant_effects: self.plant_effects.clone(),
-            outputs: self.outputs.clone(),
-            measured: self.measured.clone(),
-            sigma: self.sigma.clone(),
-            sigma_dof: self.sigma_dof.clone(),
-            train: self.test.clone(),
-            test: self.train.clone(),
-            nominal: self.nominal_raw.clone(),
-            nominal_raw: self.nominal_raw.clone(),
-            init_sensitivity: self.init_sensitivity.clone(),
-        };
-        p.refit_nominal();
-        p
-    }
-
-    /// Two-fold cross-validated fit: `components` fitted on this problem's training blocks
-    /// and scored on its held-out ones (gap, shrink, fitted values and the report come from
-    /// this fold), then fitted on the held-out blocks and scored on the training ones in
-    /// `other` (= [`Problem::swapped`]). The score is the mean of the two folds' scores
-    /// (so it keeps the scale of one held-out half and of [`Problem::held_out_score`]'s
-    /// penalty): evidence in one half's transient counts only where that half is held out,
-    /// and a candidate fitted to a transient of the training half must also predict the
-    /// other half from the held-out half's fit. `other_start` starts the second fold.
-    pub fn fit_cv(
-        &self,
-        other: &Problem,
-        components: &[Component],
-        start: Option<&[f64]>,
-        other_start: Option<&[f64]>,
-    ) -> Option<Evaluation> {
-        let mut e = self.fit(components, start)?;
-        if let Some(o) = other.fit(components, other_start) {
-            e.fold_scores = [e.score, o.score];
-            e.score = 0.5 * (e.score + o.score);
-            e.absolute_score = 0.5 * (e.absolute_score + o.absolute_score);
-            e.batch_ll = e
-                .batch_ll
-                .iter()
-                .chain(&o.batch_ll)
-                .map(|b| 0.5 * b)
-                .collect();
-            e.other_fitted = o.fitted;
-        }
-        Some(e)
     }
 
     /// Coordinate `i`: a `grid`-point grid over its range, then `golden` golden-section
@@ -1118,8 +1053,6 @@ mod tests {
             batch_ll: batches,
             fitted: Vec::new(),
             channel_rss: Vec::new(),
-            fold_scores: [score, f64::NAN],
-            other_fitted: Vec::new(),
         };
         // All 50 nats of evidence in one batch: the batch spread alone says z = 1, the
         // noise says sqrt(25) = 5.
