@@ -1,33 +1,27 @@
+"""Re-ranks gap-bench candidates offline from `bench.json` under other score variants (no\nrefit): `python3 docs/gap/rank_offline.py out/bench.json A,B,C,N,S [g]` (session 7 study,\ndocs/results.md)."""
 import json, math, sys
 TAU=2*math.pi
-def ll_train_var(rss, sig, floor=0.5):
-    ll=0
-    for (rt,nt,re,ne),s in zip(rss,sig):
-        var=max(rt/max(nt,1), floor*s*s)
-        ll-=0.5*ne*math.log(TAU*var)+0.5*re/var
+def gaussian_ll(rss, sig, variance, floor=0.5):
+    """Held-out Gaussian log-likelihood per channel, the variance chosen by `variance(rt, nt,
+    re, ne)` (training / held-out RSS and counts) and floored at `floor` times the noise's."""
+    ll = 0
+    for (rt, nt, re, ne), s in zip(rss, sig):
+        var = max(variance(rt, nt, re, ne), floor * s * s)
+        ll -= 0.5 * ne * math.log(TAU * var) + 0.5 * re / var
     return ll
-def ll_test_var(rss, sig, floor=0.5):
-    ll=0
-    for (rt,nt,re,ne),s in zip(rss,sig):
-        var=max(re/max(ne,1), floor*s*s)
-        ll-=0.5*ne*math.log(TAU*var)+0.5*re/var
-    return ll
-def ll_pool(rss,sig,floor=0.5):
-    ll=0
-    for (rt,nt,re,ne),s in zip(rss,sig):
-        var=max((rt+re)/max(nt+ne,1), floor*s*s)
-        ll-=0.5*ne*math.log(TAU*var)+0.5*re/var
-    return ll
-def ll_noise(rss,sig,floor=0.5):
-    return sum(-0.5*re/(s*s) for (rt,nt,re,ne),s in zip(rss,sig))
-def ll_2fold_approx(rss,sig,floor=0.5):
-    # symmetric: test scored with train var + train scored with test var (params fit on train, so optimistic on train)
-    ll=0
-    for (rt,nt,re,ne),s in zip(rss,sig):
-        v1=max(rt/max(nt,1), floor*s*s); v2=max(re/max(ne,1), floor*s*s)
-        ll-=0.5*ne*math.log(TAU*v1)+0.5*re/v1
-        ll-=0.5*nt*math.log(TAU*v2)+0.5*rt/v2
-    return ll
+def ll_train_var(rss, sig):
+    return gaussian_ll(rss, sig, lambda rt, nt, re, ne: rt / max(nt, 1))
+def ll_test_var(rss, sig):
+    return gaussian_ll(rss, sig, lambda rt, nt, re, ne: re / max(ne, 1))
+def ll_pool(rss, sig):
+    return gaussian_ll(rss, sig, lambda rt, nt, re, ne: (rt + re) / max(nt + ne, 1))
+def ll_noise(rss, sig):
+    return sum(-0.5 * re / (s * s) for (rt, nt, re, ne), s in zip(rss, sig))
+def ll_2fold_approx(rss, sig):
+    # Symmetric: held-out scored with the training variance plus training scored with the
+    # held-out variance (parameters fitted on training, so optimistic there).
+    swapped = [(re, ne, rt, nt) for rt, nt, re, ne in rss]
+    return ll_train_var(rss, sig) + ll_train_var(swapped, sig)
 SCORES={'A':ll_train_var,'B':ll_test_var,'C':ll_pool,'N':ll_noise,'S':ll_2fold_approx}
 def evaluate(o, fn):
     sig=o['sigma']; nom=o['nominal_rss']
