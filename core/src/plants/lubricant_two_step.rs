@@ -287,6 +287,9 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
     ///   evidence is far above that level, so only a reading the filter could barely fit and
     ///   that the next one contradicts is taken for an outlier.
     fn outlier_explains(&self, now: &IntervalExposure<T>, consumption: T) -> bool {
+        if self.pending == Pending::None {
+            return false;
+        }
         let (Some(before), Some(previous)) = (self.scalars_before.previous, self.previous) else {
             return false;
         };
@@ -312,22 +315,20 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
             + level_walk_variance
             + level_walk_variance
             + self.scalars_before.carried_variance;
-        // Without the reading in doubt nothing may look confusing: else it is a change.
+        // The outlier hypothesis's evidence, and its best particle in the same pass: without
+        // the reading in doubt nothing may look confusing, else it is a change.
         let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, bridging]);
-        let confusing = self.ratio.config().likelihood_threshold.ln();
         let ratio = [bridging_ratio.exp()];
-        let best = self
-            .ratio_before
-            .filter()
-            .particles()
-            .iter()
-            .fold(T::min_value().unwrap_or(-T::MAX_FINITE), |best, p| {
-                best.max(model.log_likelihood(p, &u4, &ratio))
-            });
+        let mut best = T::min_value().unwrap_or(-T::MAX_FINITE);
+        let outlier = self.ratio_before.filter().log_expected_likelihood(|p| {
+            let log_likelihood = model.log_likelihood(p, &u4, &ratio);
+            best = best.max(log_likelihood);
+            log_likelihood
+        }) - half * bridging.ln();
+        let confusing = self.ratio.config().likelihood_threshold.ln();
         if !(best >= confusing) {
             return false;
         }
-        let outlier = evidence(&self.ratio_before, bridging_ratio, bridging);
         let kept = match self.pending {
             Pending::None => return false,
             Pending::Change => evidence(
