@@ -5,13 +5,21 @@ fn main() {
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(1);
+    // Optional interval range to print in full, e.g. `150 200`.
+    let range: Vec<usize> = std::env::args()
+        .skip(2)
+        .filter_map(|s| s.parse().ok())
+        .collect();
     for sc in [
         FaultScenario::ExcessiveLoss,
         FaultScenario::InsufficientInjection,
     ] {
         let t0 = std::time::Instant::now();
         let o = run_step2(&Step2Settings::new(Method::Apf), sc, seed);
-        for k in (0..o.time.len()).filter(|k| *k < 12 || (38..52).contains(k) || k % 10 == 0) {
+        for k in (0..o.time.len()).filter(|k| match range.as_slice() {
+            [from, to] => (*from..*to).contains(k),
+            _ => *k < 12 || (38..52).contains(k) || k % 10 == 0,
+        }) {
             println!(
                 "{:.0} T {:.2}/{:.2} two ({:.2},{:.3}) kf ({:.2},{:.3}) truth ({:.1},{:.3})",
                 o.time[k] / 60.0,

@@ -740,14 +740,17 @@ impl LossEstimators {
         })
     }
 
-    /// Feeds one interval: its estimated temperature exposure and measured consumption (mL).
+    /// Feeds one interval: its estimated temperature exposure, measured consumption (mL) and
+    /// the temperature burst's posterior std (degC), which widens the two-step PF's reading
+    /// ([`TwoStepLoss::update_with_temperature_std`]).
     pub fn push(
         &mut self,
         exposure: prognos_core::plants::reaction_wheel::IntervalExposure<f64>,
         consumption: f64,
+        burst_std: f64,
     ) {
         let std = self.kalman.config().temperature_std;
-        self.push_with_temperature_std(exposure, consumption, std);
+        self.push_with_temperature_std(exposure, consumption, std, burst_std);
     }
 
     /// [`Self::push`] with this interval's standard deviation of the temperature estimate
@@ -757,6 +760,7 @@ impl LossEstimators {
         exposure: prognos_core::plants::reaction_wheel::IntervalExposure<f64>,
         consumption: f64,
         temperature_std: f64,
+        burst_std: f64,
     ) {
         // A rejected interval leaves the filter unchanged: nothing to do but go on.
         let _ = self
@@ -775,7 +779,12 @@ impl LossEstimators {
             &mut self.rng,
         );
         // Rejected updates are flagged inside and leave the filters unchanged: go on.
-        let _ = self.two_step.update(exposure, consumption, &mut self.rng);
+        let _ = self.two_step.update_with_temperature_std(
+            exposure,
+            consumption,
+            burst_std,
+            &mut self.rng,
+        );
     }
 
     /// Two-step estimate `(b, beta in mL/s)`.
@@ -862,7 +871,7 @@ pub fn run_step2(settings: &Step2Settings, scenario: FaultScenario, seed: u64) -
                 * prognos_core::random::standard_normal::<f64, _>(&mut noise_rng))
             .exp();
         if let Ok(exposure) = IntervalExposure::constant(INTERVAL_S, t_hat) {
-            estimators.push(exposure, measured);
+            estimators.push(exposure, measured, thermometer.posterior_std());
         }
         let t_end = t0 + INTERVAL_S;
         if scenario.parameters(t0) != scenario.parameters(t_end - 1.0) {
@@ -1239,7 +1248,7 @@ pub fn run_step3_from_readings(
                 * prognos_core::random::standard_normal::<f64, _>(&mut noise_rng))
             .exp();
         if let Ok(exposure) = IntervalExposure::constant(INTERVAL_S, t_hat) {
-            estimators.push_with_temperature_std(exposure, measured, temperature_std);
+            estimators.push_with_temperature_std(exposure, measured, temperature_std, reading.std);
         }
         measured_hi += match scenario {
             FaultScenario::ExcessiveLoss => measured,

@@ -227,18 +227,15 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         flags: Flags,
         filter: Option<&PfReport<T>>,
     ) -> ReactionWheelReport<T> {
-        let mean = self.temperature.filter().mean();
-        let var = self
+        let (temperature, var) = self
             .temperature
             .filter()
-            .covariance()
-            .get((2, 2))
-            .copied()
-            .unwrap_or_else(T::zero);
+            .moments_of(2)
+            .unwrap_or((T::zero(), T::zero()));
         let (b, beta) = self.loss_parameters();
         let (kalman_b, kalman_beta) = self.kalman.parameters();
         ReactionWheelReport {
-            temperature: mean.z,
+            temperature,
             temperature_std: if var > T::zero() {
                 var.sqrt()
             } else {
@@ -346,18 +343,23 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         let mut flags = r.filter.flags;
         // The exposure rejects a non-positive temperature estimate (possible only below
         // 0 degC); such a sample is left out of the interval and flagged.
-        let t_hat = self.temperature.filter().mean().z;
-        if self.exposure.push(t_hat, dt).is_err() {
+        let (t_hat, t_variance) = self
+            .temperature
+            .filter()
+            .moments_of(2)
+            .unwrap_or((T::zero(), T::zero()));
+        if self.exposure.push_estimate(t_hat, t_variance, dt).is_err() {
             flags.insert(Flags::MEASUREMENT_REJECTED);
         }
         let mut closed = false;
         if let Some(x) = reading {
             if let Some(previous) = self.last_reading {
                 let consumption = x - previous;
+                let temperature_std = self.exposure.estimate_std();
                 if consumption > T::zero()
                     && let Ok(exposure) = self.exposure.take()
                 {
-                    flags.insert(self.update_loss(exposure, consumption, rng));
+                    flags.insert(self.update_loss(exposure, consumption, temperature_std, rng));
                     closed = true;
                 }
             } else {
@@ -373,6 +375,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         &mut self,
         exposure: IntervalExposure<T>,
         consumption: T,
+        temperature_std: T,
         rng: &mut R,
     ) -> Flags {
         let mut flags = Flags::NONE;
@@ -380,7 +383,12 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             Ok(report) => flags.insert(report.flags),
             Err(_) => flags.insert(Flags::MEASUREMENT_REJECTED),
         }
-        flags.insert(self.two_step.update(exposure, consumption, rng));
+        flags.insert(self.two_step.update_with_temperature_std(
+            exposure,
+            consumption,
+            temperature_std,
+            rng,
+        ));
         flags
     }
 
@@ -541,7 +549,7 @@ mod tests {
             let e = IntervalExposure::constant(240.0, temp).unwrap();
             let c = e.consumption(b, beta);
             x += c;
-            p.update_loss(e, c, &mut rng);
+            p.update_loss(e, c, 0.0, &mut rng);
         }
         p.last_reading = Some(x);
         let (b_hat, beta_hat) = p.loss_parameters();

@@ -106,6 +106,9 @@ fn loss_adaptive<T: Real, const NX: usize>(
 #[derive(Clone, Debug)]
 pub struct TwoStepLoss<T: Real, const M: usize> {
     relative_noise: T,
+    /// Variance of this interval's `ln(consumption)` error: `relative_noise^2` plus what the
+    /// temperature estimate's own uncertainty does to `exp(-b/T)`.
+    reading_variance: T,
     /// Relative random walk of the consumption level per interval (`beta`'s walk over its
     /// prior mean): how fast the ratio filter forgets the readings it conditions on.
     level_walk: T,
@@ -174,6 +177,7 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
     /// An all-zero placeholder for static storage: [`TwoStepLoss::reset`] it before use.
     pub const UNSET: Self = Self {
         relative_noise: T::ZERO,
+        reading_variance: T::ZERO,
         level_walk: T::ZERO,
         level_change: T::ZERO,
         carried_variance: T::ZERO,
@@ -248,6 +252,7 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
             rng,
         )?;
         self.relative_noise = config.relative_noise;
+        self.reading_variance = config.relative_noise * config.relative_noise;
         self.level_walk = config.walk.1 / beta0;
         self.level_change = config.level_change;
         self.carried_variance = config.relative_noise * config.relative_noise;
@@ -297,7 +302,7 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         let (bridging_ratio, next_ratio) =
             ((consumption / before).ln(), (consumption / previous).ln());
         let u = now.as_input();
-        let reading_variance = self.relative_noise * self.relative_noise;
+        let reading_variance = self.reading_variance;
         let level_walk_variance = self.level_walk * self.level_walk;
         let model = LossRatioModel;
         let half: T = cast(0.5);
@@ -362,7 +367,7 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
     /// The next ratio is scored as if only this interval's reading were known (its noise has
     /// the full variance): at the start and after a rejected interval.
     fn forget_readings(&mut self, now: &IntervalExposure<T>) {
-        self.carried_variance = self.relative_noise * self.relative_noise;
+        self.carried_variance = self.reading_variance;
         self.bridged = 0;
         self.pending = Pending::None;
         for p in self.ratio.filter_mut().particles_mut().iter_mut() {
@@ -383,7 +388,7 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
     ) -> (Flags, bool) {
         let started_bridge = self.bridged == 0;
         self.pending = Pending::None;
-        let reading_variance = self.relative_noise * self.relative_noise;
+        let reading_variance = self.reading_variance;
         let level_walk_variance = self.level_walk * self.level_walk;
         let mut innovation_variance =
             reading_variance + level_walk_variance + self.carried_variance;
@@ -464,6 +469,32 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         consumption: T,
         rng: &mut R,
     ) -> Flags {
+        self.update_with_temperature_std(exposure, consumption, T::zero(), rng)
+    }
+
+    /// [`TwoStepLoss::update`] with the standard deviation (degC) of the interval's temperature
+    /// estimate, beyond what `relative_noise` already allows for (e.g. the posterior spread
+    /// of a temperature burst that did not converge). It widens this reading's error by
+    /// `b sigma_T / T^2` (the sensitivity of `ln exp(-b/T)`), at the current `b` estimate, so a
+    /// reading at a doubtful temperature moves neither `b` nor `beta` much. A non-finite or
+    /// negative std is taken as zero.
+    pub fn update_with_temperature_std<R: Rng + ?Sized>(
+        &mut self,
+        exposure: IntervalExposure<T>,
+        consumption: T,
+        temperature_std: T,
+        rng: &mut R,
+    ) -> Flags {
+        let sensitivity = self.ratio.filter().mean().x
+            * exposure.mean_inverse_temperature
+            * exposure.mean_inverse_temperature
+            * temperature_std;
+        let extra = if sensitivity.finite() && temperature_std > T::zero() {
+            sensitivity * sensitivity
+        } else {
+            T::zero()
+        };
+        self.reading_variance = self.relative_noise * self.relative_noise + extra;
         let mut flags = Flags::NONE;
         let u = exposure.as_input();
         let usable = consumption.finite() && consumption > T::zero();
@@ -537,7 +568,7 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         self.condition_rate_on(b_hat);
         let u4 = SVector::<T, 4>::from([u.x, u.y, u.z, b_hat]);
         let model = LossRateModel {
-            relative_noise: self.relative_noise,
+            relative_noise: self.reading_variance.sqrt(),
         };
         if self
             .rate
@@ -710,5 +741,40 @@ mod tests {
             late_error < 0.02,
             "b errs by {late_error} on average from interval 100"
         );
+    }
+
+    /// As above, but the thermometer says how unsure it is: 3 degC std on the wrong intervals,
+    /// 0.07 degC on the others (a burst that did not converge, as Table 6 runs show). The
+    /// estimate of `b` must not move at a wrong interval, before the next ratio can judge it:
+    /// by at most 0.3 % of `b` (0.075 % measured); told nothing, it moves by 4.6 %.
+    #[test]
+    fn a_reading_at_an_unsure_temperature_moves_b_little() {
+        let run = |(unsure, usual): (f64, f64)| {
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+            let config = TwoStepConfig::new(0.01, (0.05, 0.002), (35.0, 8.0), (7.0, 1.5));
+            let mut filter = TwoStepLoss::<f64, 500>::new(config, &mut rng).unwrap();
+            let b = 37.0;
+            let mut largest_move = 0.0f64;
+            for k in 0..210 {
+                let temp: f64 = 30.0 + 4.0 * (k as f64 * 0.26).sin();
+                let truth = IntervalExposure::constant(240.0, temp).unwrap();
+                let wrong = k % 25 == 24;
+                let (error, std) = if wrong { (3.0, unsure) } else { (0.0, usual) };
+                let measured = IntervalExposure::constant(240.0, temp + error).unwrap();
+                let noise = 1.0 + 0.01 * crate::random::standard_normal::<f64, _>(&mut rng);
+                let consumption = truth.consumption(b, 7.494e-6) * noise;
+                let before = filter.parameters().0;
+                filter.update_with_temperature_std(measured, consumption, std, &mut rng);
+                if wrong {
+                    largest_move = largest_move.max((filter.parameters().0 - before).abs() / b);
+                }
+            }
+            largest_move
+        };
+        let (told, untold) = (run((3.0, 0.07)), run((0.0, 0.0)));
+        assert!(told < 0.003, "told: b moves by {told} at a wrong interval");
+        assert!(untold > 10.0 * told, "untold: {untold}, told: {told}");
+        // A std that means nothing counts as zero.
+        assert!(run((f64::NAN, -1.0)) == untold);
     }
 }

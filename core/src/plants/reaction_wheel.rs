@@ -470,6 +470,8 @@ pub struct ExposureAccumulator<T> {
     count: u32,
     mean: T,
     m2: T,
+    /// Time integral of the temperature estimate's variance (degC^2 s).
+    estimate_variance: T,
 }
 
 impl<T: Real> Default for ExposureAccumulator<T> {
@@ -485,6 +487,7 @@ impl<T: Real> ExposureAccumulator<T> {
         count: 0,
         mean: T::ZERO,
         m2: T::ZERO,
+        estimate_variance: T::ZERO,
     };
 
     /// Adds a temperature held for `dt` seconds. Rejects non-positive or non-finite values.
@@ -501,6 +504,27 @@ impl<T: Real> ExposureAccumulator<T> {
         self.m2 += delta * (inverse - self.mean);
         self.duration += dt;
         Ok(())
+    }
+
+    /// [`ExposureAccumulator::push`] of a temperature estimate with its variance (degC^2):
+    /// a non-finite or negative variance counts as zero.
+    pub fn push_estimate(&mut self, temperature_c: T, variance: T, dt: T) -> Result<(), Error> {
+        self.push(temperature_c, dt)?;
+        if variance.finite() && variance > T::zero() {
+            self.estimate_variance += variance * dt;
+        }
+        Ok(())
+    }
+
+    /// Root of the time-mean variance of the estimates pushed so far (degC): the interval
+    /// mean's error std when the estimate's errors are fully correlated over the interval,
+    /// as a filter's are over minutes. Zero before any sample.
+    pub fn estimate_std(&self) -> T {
+        if self.duration > T::zero() {
+            (self.estimate_variance / self.duration).sqrt()
+        } else {
+            T::zero()
+        }
     }
 
     /// The summary of the samples pushed so far, and a reset for the next interval.
@@ -608,6 +632,13 @@ mod tests {
         assert!((e.integral(b) / direct - 1.0).abs() < 1e-5);
         assert_eq!(acc.take(), Err(Error::InsufficientData));
         assert!(acc.push(f64::NAN, dt).is_err());
+        // The estimate's std is the root of the time-mean variance; nothing left after take.
+        acc.push_estimate(30.0, 0.04, 1.0).unwrap();
+        acc.push_estimate(30.0, 0.16, 3.0).unwrap();
+        acc.push_estimate(30.0, f64::NAN, 1.0).unwrap();
+        assert!((acc.estimate_std() - (0.52f64 / 5.0).sqrt()).abs() < 1e-15);
+        acc.take().unwrap();
+        assert_eq!(acc.estimate_std(), 0.0);
         let c = IntervalExposure::constant(240.0, 30.0).unwrap();
         let rate: f64 = lubricant_loss_rate(37.0, 7.494e-6, 30.0);
         assert!((c.consumption(37.0, 7.494e-6) - 240.0 * rate).abs() < 1e-18);
