@@ -1,4 +1,5 @@
-//! Per-seed step-3 RUL errors and change detections (diagnosis of Table 7's spread).
+//! Per-seed step-3 RUL errors (Kalman filter and two-step PF) and change detections
+//! (diagnosis of Table 7's spread): `-- FIRST_SEED COUNT DAYS`.
 use prognos_core::filter::adaptive::Method;
 use prognos_sim::reaction_wheel::{FaultScenario, Step3Settings, run_step3};
 use rayon::prelude::*;
@@ -25,10 +26,10 @@ fn main() {
             })
             .collect();
         for (seed, o) in rows {
-            let errors: Vec<String> = o
-                .kalman_predictions
-                .iter()
-                .map(|p| {
+            let describe = |predictions: &[_]| -> Vec<String> {
+                predictions
+                    .iter()
+                    .map(|p: &prognos_sim::reaction_wheel::RulPrediction| {
                     format!(
                         "day {} err {:.2} % covered {} (truth {:.3} d, median {:.3}, 90 % {:.3}-{:.3})",
                         p.day,
@@ -39,12 +40,14 @@ fn main() {
                         p.p05,
                         p.p95
                     )
-                })
-                .collect();
+                    })
+                    .collect()
+            };
             println!(
-                "{scenario:?} seed {seed} changes {} {}",
+                "{scenario:?} seed {seed} changes {} kf {} two-step {}",
                 o.kalman_changes,
-                errors.join("; ")
+                describe(&o.kalman_predictions).join("; "),
+                describe(&o.predictions).join("; ")
             );
         }
     }

@@ -820,9 +820,12 @@ impl LossEstimators {
         (m.x, m.y * prognos_core::plants::reaction_wheel::BETA_UNIT)
     }
 
-    /// Paired posterior samples `(b, beta in 1e-6 mL/s)` of the two-step filters.
+    /// Paired posterior samples `(b, beta in 1e-6 mL/s)` of the two-step filters to predict
+    /// from ([`TwoStepLoss::confirmed_particles`]).
     pub fn two_step_particles(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
-        self.two_step.particles().map(|(b, beta, _)| (b, beta))
+        self.two_step
+            .confirmed_particles()
+            .map(|(b, beta, _)| (b, beta))
     }
 }
 

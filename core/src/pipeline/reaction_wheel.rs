@@ -395,7 +395,8 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
     /// RUL distribution (s): time until the cumulative consumption reaches `threshold` (mL)
     /// from the last reading, with the future lubricant temperature `future_temperature(k)`
     /// for prediction step `k` of length `step_s`, over at most `max_steps` steps. Uses the
-    /// two-step posterior (b and beta particles paired by index after resampling).
+    /// two-step posterior (b and beta particles paired by index after resampling), as it was
+    /// before a change still in doubt ([`TwoStepLoss::confirmed_particles`]).
     #[allow(clippy::too_many_arguments)]
     pub fn rul<R: Rng + ?Sized>(
         &self,
@@ -413,7 +414,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         for ((s, w), (b, beta, weight)) in states
             .iter_mut()
             .zip(weights.iter_mut())
-            .zip(self.two_step.particles())
+            .zip(self.two_step.confirmed_particles())
         {
             *s = Vector3::new(x0, b, beta);
             *w = weight;

@@ -142,6 +142,15 @@ pub struct TwoStepLoss<T: Real, const M: usize> {
     scalars_before: Scalars<T>,
 }
 
+/// The ratio and rate filters, the `b` the rate filter is conditioned on and the reference
+/// `1/T`: what pairing particles needs.
+type PairedState<'a, T, const M: usize> = (
+    &'a AdaptiveFilter<T, 2, M>,
+    &'a AdaptiveFilter<T, 1, M>,
+    Option<T>,
+    T,
+);
+
 /// What the last reading did, while it is in doubt.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Pending<T> {
@@ -613,20 +622,52 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
     /// paired by index (independent after resampling), weight the product of theirs; `beta`
     /// is moved to the paired `b` as in [`TwoStepLoss::condition_rate_on`].
     pub fn particle(&self, i: usize) -> Option<(T, T, T)> {
-        let b = self.ratio.filter().particles().get(i)?.x;
-        let conditioned = self.conditioned_b.unwrap_or(b);
-        let beta = self.rate.filter().particles().get(i)?.x
-            * ((b - conditioned) * self.reference_inverse_temperature).exp();
-        Some((
-            b,
-            beta,
-            self.ratio.filter().weight(i) * self.rate.filter().weight(i),
-        ))
+        Self::paired(self.current(), i)
     }
 
     /// All particles as [`TwoStepLoss::particle`].
     pub fn particles(&self) -> impl Iterator<Item = (T, T, T)> + '_ {
         (0..M).filter_map(|i| self.particle(i))
+    }
+
+    /// The particles to predict from: [`TwoStepLoss::particles`], except while a change
+    /// declared at the last reading awaits the next one's verdict (change or outlier); then
+    /// the particles from before that reading. The cloud in doubt is `b` spread by 10 degC
+    /// and weighed by one ratio, the widest posterior the filter holds, while waiting one
+    /// 4-minute interval costs a months-long prediction nothing.
+    pub fn confirmed_particles(&self) -> impl Iterator<Item = (T, T, T)> + '_ {
+        let state = if self.pending == Pending::Change {
+            let before = &self.scalars_before;
+            (
+                &self.ratio_before,
+                &self.rate_before,
+                before.conditioned_b,
+                before.reference_inverse_temperature,
+            )
+        } else {
+            self.current()
+        };
+        (0..M).filter_map(move |i| Self::paired(state, i))
+    }
+
+    /// The filters, `conditioned_b` and reference `1/T` as they stand.
+    fn current(&self) -> PairedState<'_, T, M> {
+        (
+            &self.ratio,
+            &self.rate,
+            self.conditioned_b,
+            self.reference_inverse_temperature,
+        )
+    }
+
+    fn paired(
+        (ratio, rate, conditioned_b, reference): PairedState<'_, T, M>,
+        i: usize,
+    ) -> Option<(T, T, T)> {
+        let b = ratio.filter().particles().get(i)?.x;
+        let conditioned = conditioned_b.unwrap_or(b);
+        let beta = rate.filter().particles().get(i)?.x * ((b - conditioned) * reference).exp();
+        Some((b, beta, ratio.filter().weight(i) * rate.filter().weight(i)))
     }
 }
 
@@ -776,5 +817,40 @@ mod tests {
         assert!(untold > 10.0 * told, "untold: {untold}, told: {told}");
         // A std that means nothing counts as zero.
         assert!(run((f64::NAN, -1.0)) == untold);
+    }
+
+    /// While a declared change awaits the next reading, predictions use the particles from
+    /// before it; once the next reading has decided, the current ones.
+    #[test]
+    fn predictions_wait_for_a_declared_change_to_be_confirmed() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(21);
+        let config = TwoStepConfig::new(0.01, (0.05, 0.002), (35.0, 8.0), (7.0, 1.5));
+        let mut filter = TwoStepLoss::<f64, 200>::new(config, &mut rng).unwrap();
+        let exposure = |k: usize| {
+            let temp: f64 = 30.0 + 4.0 * (k as f64 * 0.26).sin();
+            IntervalExposure::constant(240.0, temp).unwrap()
+        };
+        let mut declared = 0;
+        for k in 0..60 {
+            let mut before = [(0.0, 0.0, 0.0); 200];
+            for (slot, p) in before.iter_mut().zip(filter.particles()) {
+                *slot = p;
+            }
+            let e = exposure(k);
+            let (b, beta) = if k < 40 {
+                (37.0, 7.494e-6)
+            } else {
+                (49.0, 7.0e-6)
+            };
+            filter.update(e, e.consumption(b, beta), &mut rng);
+            if filter.pending == Pending::Change {
+                declared += 1;
+                assert!(filter.confirmed_particles().eq(before.iter().copied()));
+                assert!(!filter.particles().eq(before.iter().copied()));
+            } else {
+                assert!(filter.confirmed_particles().eq(filter.particles()));
+            }
+        }
+        assert!(declared >= 1);
     }
 }
