@@ -347,13 +347,7 @@ pub fn diagnose_with(
         nominal: nominal.clone(),
         nominal_raw: nominal,
         init_sensitivity,
-        lattice: Vec::new(),
     };
-    problem.lattice = problem
-        .measured
-        .iter()
-        .map(|y| crate::gap::effects::lattice_step(y))
-        .collect();
     problem.refit_nominal();
     refine_noise_from_residuals(&mut problem, &mut noise);
     let report = analyse(&problem);

@@ -202,34 +202,6 @@ pub fn quantised_variance(v: f64, q: f64, s: f64) -> f64 {
     }
 }
 
-/// A quantiser component of a candidate on one channel, with the signal it quantises.
-struct QuantiserInput {
-    step: f64,
-    noise: f64,
-    input: Vec<f64>,
-}
-
-/// `ln P(lo < X < hi)` for `X ~ N(mean, sd^2)`, from the tail on the interval's side (no
-/// cancellation far out); where even that underflows, the density at the interval's middle
-/// times its width.
-pub fn log_cell_probability(lo: f64, hi: f64, mean: f64, sd: f64) -> f64 {
-    let (a, b) = ((lo - mean) / sd, (hi - mean) / sd);
-    let upper = |x: f64| 0.5 * libm::erfc(x / std::f64::consts::SQRT_2);
-    let p = if a > 0.0 {
-        upper(a) - upper(b)
-    } else if b < 0.0 {
-        upper(-b) - upper(-a)
-    } else {
-        1.0 - upper(-a) - upper(b)
-    };
-    if p > 1e-300 {
-        p.ln()
-    } else {
-        let z = 0.5 * (a + b);
-        ((hi - lo) / sd).ln() - 0.5 * (std::f64::consts::TAU).ln() - 0.5 * z * z
-    }
-}
-
 /// One part of a candidate.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Component {
@@ -281,9 +253,6 @@ pub struct Problem<'a> {
     /// Sensitivity of the replay to the initial value of each output channel that the
     /// plant initialises from the data: `(channel, d outputs / d initial value, step)`.
     pub init_sensitivity: Vec<(usize, Vec<Vec<f64>>, f64)>,
-    /// Per channel: the step of the lattice its readings lie on ([`lattice_step`]), if any.
-    /// Such readings are scored by the probability of their lattice cell.
-    pub lattice: Vec<Option<f64>>,
 }
 
 /// Solves the small symmetric system `a x = b` by Gaussian elimination with partial
@@ -586,18 +555,35 @@ impl<'a> Problem<'a> {
     /// near a threshold reads a whole step off at random, which no mean prediction removes
     /// and which is the noise of a quantised sensor, not a gap).
     pub fn gap_of(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> f64 {
-        let quantisers = self.quantiser_inputs(fitted);
         let mut total = 0.0;
         for (c, (y, m)) in self.measured.iter().zip(&sim.outputs).enumerate() {
             let s2 = self.sigma[c] * self.sigma[c];
+            let quantiser = fitted.iter().find_map(|(comp, v)| match comp {
+                Component::Generic(GenericKind::Quantisation, ch) if *ch == c => Some((
+                    v.first().copied().unwrap_or(0.0),
+                    v.get(1).copied().unwrap_or(0.0),
+                )),
+                _ => None,
+            });
+            // The quantiser's input: the candidate's replay without the quantiser.
+            let input = quantiser.and_then(|_| {
+                let others: Vec<(Component, Vec<f64>)> = fitted
+                    .iter()
+                    .filter(|(comp, _)| {
+                        !matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c)
+                    })
+                    .cloned()
+                    .collect();
+                self.predict(&others).ok().map(|p| p.outputs[c].clone())
+            });
             let (mut acc, mut n) = (0.0, 0usize);
             for k in 0..y.len() {
                 if !(self.test[k] && y[k].is_finite()) {
                     continue;
                 }
-                let var = match &quantisers[c] {
-                    Some(qi) => s2.max(quantised_variance(qi.input[k], qi.step, qi.noise)),
-                    None => s2,
+                let var = match (quantiser, &input) {
+                    (Some((q, s)), Some(v)) => s2.max(quantised_variance(v[k], q, s)),
+                    _ => s2,
                 };
                 let r = y[k] - m[k];
                 acc += if r.is_finite() {
@@ -610,55 +596,6 @@ impl<'a> Problem<'a> {
             total += (acc / n.max(1) as f64 - 1.0).max(0.0);
         }
         total.sqrt()
-    }
-
-    /// Per channel, the quantiser among `fitted` on it (step, pre-quantiser noise std and
-    /// its input: the candidate's replay without that quantiser), if any.
-    fn quantiser_inputs(&self, fitted: &[(Component, Vec<f64>)]) -> Vec<Option<QuantiserInput>> {
-        (0..self.measured.len())
-            .map(|c| {
-                let (step, noise) = fitted.iter().find_map(|(comp, v)| match comp {
-                    Component::Generic(GenericKind::Quantisation, ch) if *ch == c => Some((
-                        v.first().copied().unwrap_or(0.0),
-                        v.get(1).copied().unwrap_or(0.0),
-                    )),
-                    _ => None,
-                })?;
-                let others: Vec<(Component, Vec<f64>)> = fitted
-                    .iter()
-                    .filter(|(comp, _)| {
-                        !matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c)
-                    })
-                    .cloned()
-                    .collect();
-                let input = self.predict(&others).ok()?.outputs[c].clone();
-                Some(QuantiserInput { step, noise, input })
-            })
-            .collect()
-    }
-
-    /// Log-likelihood of held-out sample `k` of lattice channel `c` (step `step`): the
-    /// probability of the reading's lattice cell. A candidate without a quantiser on the
-    /// channel predicts `m` with Gaussian spread `var`; one with a quantiser predicts its
-    /// input plus its fitted pre-quantiser noise, which is what a quantiser reads. A
-    /// Gaussian density instead scores a quantiser's reading (certain between thresholds,
-    /// a coin flip on one) with one variance for both and misses the difference.
-    fn cell_ll(
-        &self,
-        y: f64,
-        m: f64,
-        var: f64,
-        step: f64,
-        quantiser: Option<(&QuantiserInput, usize)>,
-    ) -> f64 {
-        // A tenth of a step: below it the cell is certain; the floor only keeps a
-        // degenerate spread from making one odd reading impossible.
-        let floor = 0.1 * step;
-        let (mean, sd, half) = match quantiser {
-            Some((qi, k)) => (qi.input[k], qi.noise.max(floor), 0.5 * qi.step),
-            None => (m, var.sqrt().max(floor), 0.5 * step),
-        };
-        log_cell_probability(y - half, y + half, mean, sd)
     }
 
     /// The smallest held-out gap that noise cannot produce: three standard deviations of
@@ -679,9 +616,8 @@ impl<'a> Problem<'a> {
 
     /// The held-out log-likelihood of [`Problem::held_out_score`] (no penalty) split into
     /// [`HELD_OUT_BATCHES`] runs of consecutive held-out samples.
-    pub fn held_out_batches(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> Vec<f64> {
+    pub fn held_out_batches(&self, sim: &Simulation) -> Vec<f64> {
         let train = self.channel_rss(sim, &self.train);
-        let quantisers = self.quantiser_inputs(fitted);
         let held: Vec<usize> = (0..self.test.len()).filter(|&k| self.test[k]).collect();
         let mut out = vec![0.0; HELD_OUT_BATCHES];
         for (c, ((y, m), s)) in self
@@ -692,24 +628,15 @@ impl<'a> Problem<'a> {
             .enumerate()
         {
             let (rss_tr, n_tr) = train[c];
-            let mse = rss_tr / n_tr.max(1) as f64;
-            let var = mse.max(0.5 * s * s);
+            let var = (rss_tr / n_tr.max(1) as f64).max(0.5 * s * s);
             let norm = 0.5 * (std::f64::consts::TAU * var).ln();
             for (i, &k) in held.iter().enumerate() {
                 if y[k].is_finite() {
                     let r = y[k] - m[k];
-                    let ll = if !r.is_finite() {
-                        f64::NEG_INFINITY
-                    } else if let Some(step) = self.lattice[c] {
-                        self.cell_ll(
-                            y[k],
-                            m[k],
-                            mse,
-                            step,
-                            quantisers[c].as_ref().map(|q| (q, k)),
-                        )
-                    } else {
+                    let ll = if r.is_finite() {
                         -norm - 0.5 * r * r / var
+                    } else {
+                        f64::NEG_INFINITY
                     };
                     out[i * HELD_OUT_BATCHES / held.len().max(1)] += ll;
                 }
@@ -718,48 +645,19 @@ impl<'a> Problem<'a> {
         out
     }
 
-    /// Held-out log-likelihood, minus `k/2 ln n_train`: Gaussian with per-channel variance
-    /// from the training residuals, or on a lattice channel the probability of each
-    /// reading's cell (see [`Problem::cell_ll`]).
-    pub fn held_out_score(
-        &self,
-        sim: &Simulation,
-        fitted: &[(Component, Vec<f64>)],
-        k: usize,
-    ) -> f64 {
+    /// Held-out Gaussian log-likelihood with per-channel variance from the training
+    /// residuals, minus `k/2 ln n_train`.
+    pub fn held_out_score(&self, sim: &Simulation, k: usize) -> f64 {
         let train = self.channel_rss(sim, &self.train);
         let test = self.channel_rss(sim, &self.test);
-        let quantisers = self.quantiser_inputs(fitted);
         let mut ll = 0.0;
         let mut n_train = 0;
-        for (c, (((rss_tr, n_tr), (rss_te, n_te)), s)) in
-            train.iter().zip(&test).zip(&self.sigma).enumerate()
-        {
-            let mse = rss_tr / (*n_tr).max(1) as f64;
-            n_train += n_tr;
-            if let Some(step) = self.lattice[c] {
-                let (y, m) = (&self.measured[c], &sim.outputs[c]);
-                for k in 0..y.len() {
-                    if self.test[k] && y[k].is_finite() {
-                        ll += if (y[k] - m[k]).is_finite() {
-                            self.cell_ll(
-                                y[k],
-                                m[k],
-                                mse,
-                                step,
-                                quantisers[c].as_ref().map(|q| (q, k)),
-                            )
-                        } else {
-                            f64::NEG_INFINITY
-                        };
-                    }
-                }
-                continue;
-            }
+        for (((rss_tr, n_tr), (rss_te, n_te)), s) in train.iter().zip(&test).zip(&self.sigma) {
             // Floored at half the noise variance: on noise-free (simulated) data a perfect fit
             // would otherwise make any held-out residual infinitely unlikely.
-            let var = mse.max(0.5 * s * s);
+            let var = (rss_tr / (*n_tr).max(1) as f64).max(0.5 * s * s);
             ll -= 0.5 * *n_te as f64 * (std::f64::consts::TAU * var).ln() + 0.5 * rss_te / var;
+            n_train += n_tr;
         }
         let score = ll - 0.5 * k as f64 * (n_train.max(2) as f64).ln();
         if score.is_finite() {
@@ -846,8 +744,8 @@ impl<'a> Problem<'a> {
         let sim = self.predict(&fitted).ok()?;
         let before = self.gap(&self.nominal);
         let after = self.gap_of(&sim, &fitted);
-        let nominal_score = self.held_out_score(&self.nominal, &[], 0);
-        let absolute = self.held_out_score(&sim, &fitted, dims.len());
+        let nominal_score = self.held_out_score(&self.nominal, 0);
+        let absolute = self.held_out_score(&sim, dims.len());
         let names: Vec<String> = components.iter().map(|c| self.component_name(c)).collect();
         Some(Evaluation {
             effect: names.join("+"),
@@ -877,7 +775,7 @@ impl<'a> Problem<'a> {
             truth_error_after: self.truth_error(&sim),
             train_cost: best,
             absolute_score: absolute,
-            batch_ll: self.held_out_batches(&sim, &fitted),
+            batch_ll: self.held_out_batches(&sim),
             channel_rss: self.rss_split(&sim),
             fitted,
         })
@@ -1172,25 +1070,6 @@ mod tests {
         // Equal candidates are not separated; the worse one has z <= 0.
         assert_eq!(separation(&b, &b), 0.0);
         assert!(separation(&b, &a) <= 0.0);
-    }
-
-    #[test]
-    fn cell_probability_is_the_normal_mass_and_finite_far_out() {
-        // Central cell of width 2 sd: 68.27 %.
-        let p = log_cell_probability(-1.0, 1.0, 0.0, 1.0).exp();
-        assert!((p - 0.682_689_5).abs() < 1e-6, "{p}");
-        // One tail either side: the same mass, no cancellation.
-        let (hi, lo) = (
-            log_cell_probability(5.0, 6.0, 0.0, 1.0),
-            log_cell_probability(-6.0, -5.0, 0.0, 1.0),
-        );
-        assert!(
-            (hi - lo).abs() < 1e-12 && (hi.exp() - 2.857e-7).abs() < 1e-9,
-            "{hi}"
-        );
-        // Beyond double precision: the density approximation, finite and tiny.
-        let far = log_cell_probability(99.0, 101.0, 0.0, 1.0);
-        assert!(far.is_finite() && far < -4000.0, "{far}");
     }
 
     #[test]
