@@ -92,7 +92,9 @@ impl GenericKind {
             ],
             GenericKind::MeasurementDelay => vec![(0.0, 25.0 * dt, Scale::Linear)],
             GenericKind::OutputSaturation => vec![(0.05 * a, a, Scale::Linear)],
-            GenericKind::DeadZone => vec![(1e-4 * a, 0.5 * a, Scale::Log)],
+            // From below the noise: on a precise sensor with a large swing a tenth of a
+            // thousandth of the swing is still many noise stds.
+            GenericKind::DeadZone => vec![((1e-4 * a).min(0.1 * sigma), 0.5 * a, Scale::Log)],
             GenericKind::FirstOrderLag => vec![(0.1 * dt, 200.0 * dt, Scale::Log)],
         }
     }
@@ -347,7 +349,12 @@ impl<'a> Problem<'a> {
                         .iter()
                         .any(|(k, c)| *k == kind.name() && c == channel)
                 });
-                if !replaced {
+                // A quantiser's readings lie on its lattice whatever the noise before it
+                // (`y = q round((y_model + e) / q)`); off a lattice its conditional mean is
+                // only a periodic distortion that mimics other effects.
+                let impossible =
+                    kind == GenericKind::Quantisation && lattice_step(&self.measured[ch]).is_none();
+                if !replaced && !impossible {
                     out.push(Component::Generic(kind, ch));
                 }
             }
