@@ -10,7 +10,7 @@
 //! method would stall. Scores are held-out Gaussian log-likelihoods (per-channel variance
 //! from the training residuals) minus `k/2 ln n_train` (BIC-like).
 
-use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Simulation};
+use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use serde::Serialize;
 
 /// The generic, plant-independent sensor effects.
@@ -368,11 +368,17 @@ impl<'a> Problem<'a> {
             match c {
                 Component::Plant(i) => {
                     for r in &self.plant_effects[*i].fit {
+                        let model = self.base.get(r.name).copied();
+                        let (lo, hi) = match (r.side, model) {
+                            (Side::BelowModel, Some(m)) => (r.lo.min(m), r.hi.min(m)),
+                            (Side::AboveModel, Some(m)) => (r.lo.max(m), r.hi.max(m)),
+                            _ => (r.lo, r.hi),
+                        };
                         dims.push(Dim {
                             component: ci,
                             name: r.name.to_string(),
-                            lo: r.lo,
-                            hi: r.hi,
+                            lo,
+                            hi,
                             scale: r.scale,
                         });
                     }
