@@ -688,3 +688,24 @@ fn overlays(problem: &Problem, report: &WhereReport, chosen: Option<&Evaluation>
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_still_staircase_is_a_lattice_and_a_noisy_signal_is_not() {
+        // Steps of 0.5 held for 10 samples, with a few large jumps: most second
+        // differences are exactly zero.
+        let y: Vec<f64> = (0..400)
+            .map(|k| 0.5 * ((k / 10) % 7) as f64 + if k > 200 { 3.0 } else { 0.0 })
+            .collect();
+        assert_eq!(still_lattice_step(&y), Some(0.5));
+        // The same staircase moving every sample: on the lattice, but not still.
+        let moving: Vec<f64> = (0..400).map(|k| 0.5 * ((k * k) % 13) as f64).collect();
+        assert_eq!(still_lattice_step(&moving), None);
+        // Continuous values: no lattice.
+        let smooth: Vec<f64> = (0..400).map(|k| (0.37 * k as f64).sin()).collect();
+        assert_eq!(still_lattice_step(&smooth), None);
+    }
+}
