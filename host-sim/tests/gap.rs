@@ -335,3 +335,35 @@ fn gap_recovers_the_isentropic_critical_ratio_from_progpy_data() {
             .any(|e| e == "choked_flow")
     );
 }
+
+#[test]
+fn gap_says_unknown_for_an_inlet_sensor_offset_a_stiffer_spring_would_fit() {
+    // A weakening spring only weakens: the pair spring_weakening (k above the model's)
+    // + sensor_scale:q that explained this set is no physical explanation.
+    let opts = BenchOptions {
+        plants: vec!["valve".into()],
+        seeds: 1,
+        ratios: vec![4.0],
+        seed: 7,
+        only: vec!["spring_weakening".into()],
+        extra_sets: 1,
+    };
+    let sets = generate("valve", &opts).unwrap();
+    let d = sets
+        .iter()
+        .find(|d| {
+            d.label
+                .effects
+                .iter()
+                .any(|e| e == "inlet_pressure_sensor_offset")
+        })
+        .unwrap();
+    let o = run_one(d).unwrap();
+    assert_eq!(o.verdict, "unknown", "top 3: {:?}", o.top3);
+    // The catalogue's own spring_weakening set is still found.
+    let w = sets
+        .iter()
+        .find(|d| d.label.kind == CaseKind::Single)
+        .unwrap();
+    assert_eq!(run_one(w).unwrap().verdict, "spring_weakening");
+}

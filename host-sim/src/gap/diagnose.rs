@@ -275,7 +275,13 @@ pub fn diagnose_with(
         let (s, dof, source) = match meta.noise.get(&key) {
             Some(v) => (v.value, f64::INFINITY, "meta"),
             None => match noise_std_from_differences(&y) {
-                Some((s, dof)) => (s, dof, "differences"),
+                Some((s, dof)) => match still_lattice_step(&y) {
+                    // Noise below the step: over half the second differences are exactly
+                    // zero, so the estimate measures the signal's own steps; the error of
+                    // such readings is their rounding, of variance q^2 / 12 (Sheppard).
+                    Some(q) if q / 12f64.sqrt() < s => (q / 12f64.sqrt(), dof, "lattice step"),
+                    _ => (s, dof, "differences"),
+                },
                 None => {
                     return Err(header_error(
                         csv_path,
@@ -382,6 +388,19 @@ pub fn diagnose_with(
         overlays,
         nominal_rss: problem.rss_split(&problem.nominal),
     })
+}
+
+/// The step of the lattice `y` lies on ([`crate::gap::effects::lattice_step`]) when over
+/// half of its second differences are exactly zero (the noise is below the step).
+fn still_lattice_step(y: &[f64]) -> Option<f64> {
+    let q = crate::gap::effects::lattice_step(y)?;
+    let d2: Vec<f64> = y
+        .windows(3)
+        .filter(|w| w.iter().all(|v| v.is_finite()))
+        .map(|w| w[2] - 2.0 * w[1] + w[0])
+        .collect();
+    let zero = d2.iter().filter(|d| **d == 0.0).count();
+    (2 * zero > d2.len()).then_some(q)
 }
 
 /// Re-estimates the noise of channels whose level came from the data's own differences
@@ -668,4 +687,25 @@ fn overlays(problem: &Problem, report: &WhereReport, chosen: Option<&Evaluation>
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_still_staircase_is_a_lattice_and_a_noisy_signal_is_not() {
+        // Steps of 0.5 held for 10 samples, with a few large jumps: most second
+        // differences are exactly zero.
+        let y: Vec<f64> = (0..400)
+            .map(|k| 0.5 * ((k / 10) % 7) as f64 + if k > 200 { 3.0 } else { 0.0 })
+            .collect();
+        assert_eq!(still_lattice_step(&y), Some(0.5));
+        // The same staircase moving every sample: on the lattice, but not still.
+        let moving: Vec<f64> = (0..400).map(|k| 0.5 * ((k * k) % 13) as f64).collect();
+        assert_eq!(still_lattice_step(&moving), None);
+        // Continuous values: no lattice.
+        let smooth: Vec<f64> = (0..400).map(|k| (0.37 * k as f64).sin()).collect();
+        assert_eq!(still_lattice_step(&smooth), None);
+    }
 }

@@ -10,7 +10,7 @@
 //! method would stall. Scores are held-out Gaussian log-likelihoods (per-channel variance
 //! from the training residuals) minus `k/2 ln n_train` (BIC-like).
 
-use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Simulation};
+use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use serde::Serialize;
 
 /// The generic, plant-independent sensor effects.
@@ -92,7 +92,9 @@ impl GenericKind {
             ],
             GenericKind::MeasurementDelay => vec![(0.0, 25.0 * dt, Scale::Linear)],
             GenericKind::OutputSaturation => vec![(0.05 * a, a, Scale::Linear)],
-            GenericKind::DeadZone => vec![(1e-4 * a, 0.5 * a, Scale::Log)],
+            // From below the noise: on a precise sensor with a large swing a tenth of a
+            // thousandth of the swing is still many noise stds.
+            GenericKind::DeadZone => vec![((1e-4 * a).min(0.1 * sigma), 0.5 * a, Scale::Log)],
             GenericKind::FirstOrderLag => vec![(0.1 * dt, 200.0 * dt, Scale::Log)],
         }
     }
@@ -347,7 +349,12 @@ impl<'a> Problem<'a> {
                         .iter()
                         .any(|(k, c)| *k == kind.name() && c == channel)
                 });
-                if !replaced {
+                // A quantiser's readings lie on its lattice whatever the noise before it
+                // (`y = q round((y_model + e) / q)`); off a lattice its conditional mean is
+                // only a periodic distortion that mimics other effects.
+                let impossible =
+                    kind == GenericKind::Quantisation && lattice_step(&self.measured[ch]).is_none();
+                if !replaced && !impossible {
                     out.push(Component::Generic(kind, ch));
                 }
             }
@@ -361,11 +368,17 @@ impl<'a> Problem<'a> {
             match c {
                 Component::Plant(i) => {
                     for r in &self.plant_effects[*i].fit {
+                        let model = self.base.get(r.name).copied();
+                        let (lo, hi) = match (r.side, model) {
+                            (Side::BelowModel, Some(m)) => (r.lo.min(m), r.hi.min(m)),
+                            (Side::AboveModel, Some(m)) => (r.lo.max(m), r.hi.max(m)),
+                            _ => (r.lo, r.hi),
+                        };
                         dims.push(Dim {
                             component: ci,
                             name: r.name.to_string(),
-                            lo: r.lo,
-                            hi: r.hi,
+                            lo,
+                            hi,
                             scale: r.scale,
                         });
                     }
@@ -616,7 +629,7 @@ impl<'a> Problem<'a> {
 
     /// The held-out log-likelihood of [`Problem::held_out_score`] (no penalty) split into
     /// [`HELD_OUT_BATCHES`] runs of consecutive held-out samples.
-    pub fn held_out_batches(&self, sim: &Simulation) -> Vec<f64> {
+    pub fn held_out_batches(&self, sim: &Simulation, predicted: &[Option<Vec<f64>>]) -> Vec<f64> {
         let train = self.channel_rss(sim, &self.train);
         let held: Vec<usize> = (0..self.test.len()).filter(|&k| self.test[k]).collect();
         let mut out = vec![0.0; HELD_OUT_BATCHES];
@@ -630,13 +643,16 @@ impl<'a> Problem<'a> {
             let (rss_tr, n_tr) = train[c];
             let var = (rss_tr / n_tr.max(1) as f64).max(0.5 * s * s);
             let norm = 0.5 * (std::f64::consts::TAU * var).ln();
+            let own = predicted.get(c).and_then(Option::as_ref);
             for (i, &k) in held.iter().enumerate() {
                 if y[k].is_finite() {
                     let r = y[k] - m[k];
-                    let ll = if r.is_finite() {
-                        -norm - 0.5 * r * r / var
-                    } else {
+                    let ll = if !r.is_finite() {
                         f64::NEG_INFINITY
+                    } else if let Some(v) = own {
+                        -0.5 * (std::f64::consts::TAU * v[k]).ln() - 0.5 * r * r / v[k]
+                    } else {
+                        -norm - 0.5 * r * r / var
                     };
                     out[i * HELD_OUT_BATCHES / held.len().max(1)] += ll;
                 }
@@ -646,13 +662,32 @@ impl<'a> Problem<'a> {
     }
 
     /// Held-out Gaussian log-likelihood with per-channel variance from the training
-    /// residuals, minus `k/2 ln n_train`.
-    pub fn held_out_score(&self, sim: &Simulation, k: usize) -> f64 {
+    /// residuals (per sample from `predicted` where a candidate predicts it, see
+    /// [`Problem::predicted_variances`]), minus `k/2 ln n_train`.
+    pub fn held_out_score(
+        &self,
+        sim: &Simulation,
+        k: usize,
+        predicted: &[Option<Vec<f64>>],
+    ) -> f64 {
         let train = self.channel_rss(sim, &self.train);
         let test = self.channel_rss(sim, &self.test);
         let mut ll = 0.0;
         let mut n_train = 0;
-        for (((rss_tr, n_tr), (rss_te, n_te)), s) in train.iter().zip(&test).zip(&self.sigma) {
+        for (c, (((rss_tr, n_tr), (rss_te, n_te)), s)) in
+            train.iter().zip(&test).zip(&self.sigma).enumerate()
+        {
+            if let Some(v) = predicted.get(c).and_then(Option::as_ref) {
+                let (y, m) = (&self.measured[c], &sim.outputs[c]);
+                for j in 0..y.len() {
+                    if self.test[j] && y[j].is_finite() {
+                        let r = y[j] - m[j];
+                        ll += -0.5 * (std::f64::consts::TAU * v[j]).ln() - 0.5 * r * r / v[j];
+                    }
+                }
+                n_train += n_tr;
+                continue;
+            }
             // Floored at half the noise variance: on noise-free (simulated) data a perfect fit
             // would otherwise make any held-out residual infinitely unlikely.
             let var = (rss_tr / (*n_tr).max(1) as f64).max(0.5 * s * s);
@@ -665,6 +700,39 @@ impl<'a> Problem<'a> {
         } else {
             f64::NEG_INFINITY
         }
+    }
+
+    /// Per channel, the reading variance per sample that a quantiser among `fitted`
+    /// predicts ([`quantised_variance`] of its input, floored at half the noise variance):
+    /// between thresholds the reading is certain, on one it is a coin flip between two
+    /// steps, so one variance for the channel misjudges both (`None` without a quantiser).
+    pub fn predicted_variances(&self, fitted: &[(Component, Vec<f64>)]) -> Vec<Option<Vec<f64>>> {
+        (0..self.measured.len())
+            .map(|c| {
+                let (q, s) = fitted.iter().find_map(|(comp, v)| match comp {
+                    Component::Generic(GenericKind::Quantisation, ch) if *ch == c => Some((
+                        v.first().copied().unwrap_or(0.0),
+                        v.get(1).copied().unwrap_or(0.0),
+                    )),
+                    _ => None,
+                })?;
+                let others: Vec<(Component, Vec<f64>)> = fitted
+                    .iter()
+                    .filter(|(comp, _)| {
+                        !matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c)
+                    })
+                    .cloned()
+                    .collect();
+                let input = self.predict(&others).ok()?.outputs[c].clone();
+                let floor = 0.5 * self.sigma[c] * self.sigma[c];
+                Some(
+                    input
+                        .iter()
+                        .map(|v| quantised_variance(*v, q, s).max(floor))
+                        .collect(),
+                )
+            })
+            .collect()
     }
 
     /// RMS over truth columns (each scaled by its own std over the data) of the replayed
@@ -744,8 +812,9 @@ impl<'a> Problem<'a> {
         let sim = self.predict(&fitted).ok()?;
         let before = self.gap(&self.nominal);
         let after = self.gap_of(&sim, &fitted);
-        let nominal_score = self.held_out_score(&self.nominal, 0);
-        let absolute = self.held_out_score(&sim, dims.len());
+        let predicted = self.predicted_variances(&fitted);
+        let nominal_score = self.held_out_score(&self.nominal, 0, &[]);
+        let absolute = self.held_out_score(&sim, dims.len(), &predicted);
         let names: Vec<String> = components.iter().map(|c| self.component_name(c)).collect();
         Some(Evaluation {
             effect: names.join("+"),
@@ -775,7 +844,7 @@ impl<'a> Problem<'a> {
             truth_error_after: self.truth_error(&sim),
             train_cost: best,
             absolute_score: absolute,
-            batch_ll: self.held_out_batches(&sim),
+            batch_ll: self.held_out_batches(&sim, &predicted),
             channel_rss: self.rss_split(&sim),
             fitted,
         })

@@ -44,6 +44,19 @@ pub struct FitRange {
     pub hi: f64,
     /// Search scale.
     pub scale: Scale,
+    /// Which side of the user's model value the effect can move the parameter to.
+    pub side: Side,
+}
+
+/// The direction a catalogue effect moves its parameter from the user's model value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// Either way (the effect is a departure, not a named wear).
+    Either,
+    /// Only down (a wear that lowers it, such as a weakening spring).
+    BelowModel,
+    /// Only up (a wear that raises it, such as growing friction).
+    AboveModel,
 }
 
 /// One effect of a plant's own catalogue.
@@ -81,10 +94,19 @@ impl EffectSpec {
                 lo,
                 hi,
                 scale,
+                side: Side::Either,
             }],
             needs_inputs: Vec::new(),
             replaces_generic: Vec::new(),
         }
+    }
+
+    /// The same effect, its parameters moved from the model value to `side` only.
+    pub fn toward(mut self, side: Side) -> Self {
+        for r in &mut self.fit {
+            r.side = side;
+        }
+        self
     }
 }
 

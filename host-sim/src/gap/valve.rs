@@ -18,7 +18,7 @@
 //! lower.
 
 use crate::gap::plant::{
-    EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, param,
+    EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Side, Simulation, param,
 };
 use nalgebra::SVector;
 use prognos_core::plants::valve::{Choking, Contact, Integrator, NU, NX, ValveParams, idx};
@@ -96,20 +96,25 @@ pub const VALVE_PARAMETERS: &[ParamSpec] = &[
 pub fn valve_effects() -> Vec<EffectSpec> {
     let one = |name, doc, p, lo, hi| EffectSpec::single(name, doc, p, lo, hi, Scale::Log);
     vec![
+        // Named wear: friction grows and the spring weakens with spring work (the
+        // valve paper's damage modes), so each is fitted on its own side of the model's
+        // value; a "weakening" to a stiffer spring explains nothing physical.
         one(
             "friction_increase",
-            "friction coefficient r departs from the model's",
+            "friction coefficient r rises above the model's",
             "friction",
             1.0e3,
             1.0e5,
-        ),
+        )
+        .toward(Side::AboveModel),
         one(
             "spring_weakening",
-            "spring constant k departs from the model's",
+            "spring constant k falls below the model's",
             "spring",
             1.0e3,
             1.0e5,
-        ),
+        )
+        .toward(Side::BelowModel),
         one(
             "internal_leak",
             "leak across the piston, area A_i",

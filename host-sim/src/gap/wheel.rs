@@ -19,7 +19,7 @@
 
 use crate::gap::plant::{
     EffectSpec, FitRange, GapPlant, MotionThresholds, ParamSpec, Params, PlantData, Regime, Scale,
-    Simulation, motion_regimes, param,
+    Side, Simulation, motion_regimes, param,
 };
 use prognos_core::plants::reaction_wheel::WheelParams;
 use std::collections::BTreeMap;
@@ -217,12 +217,14 @@ pub fn wheel_effects() -> Vec<EffectSpec> {
                     lo: 1e-7,
                     hi: 10.0,
                     scale: Scale::Log,
+                    side: Side::Either,
                 },
                 FitRange {
                     name: "noise_phase",
                     lo: 0.0,
                     hi: std::f64::consts::TAU,
                     scale: Scale::Linear,
+                    side: Side::Either,
                 },
             ],
             needs_inputs: Vec::new(),
