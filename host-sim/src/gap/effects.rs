@@ -571,32 +571,15 @@ impl<'a> Problem<'a> {
         let mut total = 0.0;
         for (c, (y, m)) in self.measured.iter().zip(&sim.outputs).enumerate() {
             let s2 = self.sigma[c] * self.sigma[c];
-            let quantiser = fitted.iter().find_map(|(comp, v)| match comp {
-                Component::Generic(GenericKind::Quantisation, ch) if *ch == c => Some((
-                    v.first().copied().unwrap_or(0.0),
-                    v.get(1).copied().unwrap_or(0.0),
-                )),
-                _ => None,
-            });
-            // The quantiser's input: the candidate's replay without the quantiser.
-            let input = quantiser.and_then(|_| {
-                let others: Vec<(Component, Vec<f64>)> = fitted
-                    .iter()
-                    .filter(|(comp, _)| {
-                        !matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c)
-                    })
-                    .cloned()
-                    .collect();
-                self.predict(&others).ok().map(|p| p.outputs[c].clone())
-            });
+            let quantiser = self.quantiser_on(fitted, c);
             let (mut acc, mut n) = (0.0, 0usize);
             for k in 0..y.len() {
                 if !(self.test[k] && y[k].is_finite()) {
                     continue;
                 }
-                let var = match (quantiser, &input) {
-                    (Some((q, s)), Some(v)) => s2.max(quantised_variance(v[k], q, s)),
-                    _ => s2,
+                let var = match &quantiser {
+                    Some(((q, s), input)) => s2.max(quantised_variance(input[k], *q, *s)),
+                    None => s2,
                 };
                 let r = y[k] - m[k];
                 acc += if r.is_finite() {
@@ -702,6 +685,28 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// The quantiser among `fitted` on channel `c`, if any: its `(step, offset)` and its
+    /// input, the candidate's replay of that channel without the quantiser.
+    fn quantiser_on(
+        &self,
+        fitted: &[(Component, Vec<f64>)],
+        c: usize,
+    ) -> Option<((f64, f64), Vec<f64>)> {
+        let on_c = |comp: &Component| matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c);
+        let (_, v) = fitted.iter().find(|(comp, _)| on_c(comp))?;
+        let parameters = (
+            v.first().copied().unwrap_or(0.0),
+            v.get(1).copied().unwrap_or(0.0),
+        );
+        let others: Vec<(Component, Vec<f64>)> = fitted
+            .iter()
+            .filter(|(comp, _)| !on_c(comp))
+            .cloned()
+            .collect();
+        let input = self.predict(&others).ok()?.outputs.get(c)?.clone();
+        Some((parameters, input))
+    }
+
     /// Per channel, the reading variance per sample that a quantiser among `fitted`
     /// predicts ([`quantised_variance`] of its input, floored at half the noise variance):
     /// between thresholds the reading is certain, on one it is a coin flip between two
@@ -709,21 +714,7 @@ impl<'a> Problem<'a> {
     pub fn predicted_variances(&self, fitted: &[(Component, Vec<f64>)]) -> Vec<Option<Vec<f64>>> {
         (0..self.measured.len())
             .map(|c| {
-                let (q, s) = fitted.iter().find_map(|(comp, v)| match comp {
-                    Component::Generic(GenericKind::Quantisation, ch) if *ch == c => Some((
-                        v.first().copied().unwrap_or(0.0),
-                        v.get(1).copied().unwrap_or(0.0),
-                    )),
-                    _ => None,
-                })?;
-                let others: Vec<(Component, Vec<f64>)> = fitted
-                    .iter()
-                    .filter(|(comp, _)| {
-                        !matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c)
-                    })
-                    .cloned()
-                    .collect();
-                let input = self.predict(&others).ok()?.outputs[c].clone();
+                let ((q, s), input) = self.quantiser_on(fitted, c)?;
                 let floor = 0.5 * self.sigma[c] * self.sigma[c];
                 Some(
                     input
