@@ -220,18 +220,23 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         Ok(())
     }
 
+    /// Mean and variance of the temperature particles (degC, degC^2).
+    fn temperature_moments(&self) -> (T, T) {
+        self.temperature
+            .filter()
+            .moments_of(2)
+            .unwrap_or((T::zero(), T::zero()))
+    }
+
+    /// The report, with the temperature's `(mean, variance)` as the step computed them.
     fn report(
         &self,
+        (temperature, var): (T, T),
         predict_only: bool,
         interval_closed: bool,
         flags: Flags,
         filter: Option<&PfReport<T>>,
     ) -> ReactionWheelReport<T> {
-        let (temperature, var) = self
-            .temperature
-            .filter()
-            .moments_of(2)
-            .unwrap_or((T::zero(), T::zero()));
         let (b, beta) = self.loss_parameters();
         let (kalman_b, kalman_beta) = self.kalman.parameters();
         ReactionWheelReport {
@@ -328,7 +333,8 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             )?;
             self.last = Some((t, command_v));
             self.last_reading = reading;
-            return Ok(self.report(false, false, Flags::NONE, None));
+            let moments = self.temperature_moments();
+            return Ok(self.report(moments, false, false, Flags::NONE, None));
         };
         let dt = t - t_prev;
         if !(dt > T::zero()) {
@@ -343,11 +349,8 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
         let mut flags = r.filter.flags;
         // The exposure rejects a non-positive temperature estimate (possible only below
         // 0 degC); such a sample is left out of the interval and flagged.
-        let (t_hat, t_variance) = self
-            .temperature
-            .filter()
-            .moments_of(2)
-            .unwrap_or((T::zero(), T::zero()));
+        let moments = self.temperature_moments();
+        let (t_hat, t_variance) = moments;
         if self.exposure.push_estimate(t_hat, t_variance, dt).is_err() {
             flags.insert(Flags::MEASUREMENT_REJECTED);
         }
@@ -368,7 +371,7 @@ impl<T: Real, const N: usize, const M: usize> ReactionWheel<T, N, M> {
             self.last_reading = Some(x);
         }
         self.last = Some((t, command_v));
-        Ok(self.report(wheel_y.is_none(), closed, flags, Some(&r.filter)))
+        Ok(self.report(moments, wheel_y.is_none(), closed, flags, Some(&r.filter)))
     }
 
     fn update_loss<R: Rng + ?Sized>(

@@ -494,12 +494,16 @@ impl<T: Real, const M: usize> TwoStepLoss<T, M> {
         temperature_std: T,
         rng: &mut R,
     ) -> Flags {
-        let sensitivity = self.ratio.filter().mean().x
-            * exposure.mean_inverse_temperature
-            * exposure.mean_inverse_temperature
-            * temperature_std;
-        let extra = if sensitivity.finite() && temperature_std > T::zero() {
-            sensitivity * sensitivity
+        let extra = if temperature_std > T::zero() {
+            let sensitivity = self.ratio.filter().mean().x
+                * exposure.mean_inverse_temperature
+                * exposure.mean_inverse_temperature
+                * temperature_std;
+            if sensitivity.finite() {
+                sensitivity * sensitivity
+            } else {
+                T::zero()
+            }
         } else {
             T::zero()
         };

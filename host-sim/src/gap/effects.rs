@@ -13,6 +13,15 @@
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use serde::Serialize;
 
+/// A fitted quantiser on one channel: its `(step, offset)` and its input, the candidate's
+/// replay of that channel without the quantiser.
+pub type QuantiserReplay = ((f64, f64), Vec<f64>);
+
+/// `ln N(r; 0, variance)`.
+fn gaussian_log_density(r: f64, variance: f64) -> f64 {
+    -0.5 * (std::f64::consts::TAU * variance).ln() - 0.5 * r * r / variance
+}
+
 /// The generic, plant-independent sensor effects.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum GenericKind {
@@ -567,17 +576,18 @@ impl<'a> Problem<'a> {
     /// is measured against the larger of the noise and that variance (a coarse quantiser
     /// near a threshold reads a whole step off at random, which no mean prediction removes
     /// and which is the noise of a quantised sensor, not a gap).
-    pub fn gap_of(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> f64 {
+    /// `quantisers` is [`Problem::quantisers`] of those components.
+    pub fn gap_of(&self, sim: &Simulation, quantisers: &[Option<QuantiserReplay>]) -> f64 {
         let mut total = 0.0;
         for (c, (y, m)) in self.measured.iter().zip(&sim.outputs).enumerate() {
             let s2 = self.sigma[c] * self.sigma[c];
-            let quantiser = self.quantiser_on(fitted, c);
+            let quantiser = quantisers.get(c).and_then(Option::as_ref);
             let (mut acc, mut n) = (0.0, 0usize);
             for k in 0..y.len() {
                 if !(self.test[k] && y[k].is_finite()) {
                     continue;
                 }
-                let var = match &quantiser {
+                let var = match quantiser {
                     Some(((q, s), input)) => s2.max(quantised_variance(input[k], *q, *s)),
                     None => s2,
                 };
@@ -633,7 +643,7 @@ impl<'a> Problem<'a> {
                     let ll = if !r.is_finite() {
                         f64::NEG_INFINITY
                     } else if let Some(v) = own {
-                        -0.5 * (std::f64::consts::TAU * v[k]).ln() - 0.5 * r * r / v[k]
+                        gaussian_log_density(r, v[k])
                     } else {
                         -norm - 0.5 * r * r / var
                     };
@@ -665,7 +675,7 @@ impl<'a> Problem<'a> {
                 for j in 0..y.len() {
                     if self.test[j] && y[j].is_finite() {
                         let r = y[j] - m[j];
-                        ll += -0.5 * (std::f64::consts::TAU * v[j]).ln() - 0.5 * r * r / v[j];
+                        ll += gaussian_log_density(r, v[j]);
                     }
                 }
                 n_train += n_tr;
@@ -685,13 +695,14 @@ impl<'a> Problem<'a> {
         }
     }
 
-    /// The quantiser among `fitted` on channel `c`, if any: its `(step, offset)` and its
-    /// input, the candidate's replay of that channel without the quantiser.
-    fn quantiser_on(
-        &self,
-        fitted: &[(Component, Vec<f64>)],
-        c: usize,
-    ) -> Option<((f64, f64), Vec<f64>)> {
+    /// Per channel, the quantiser among `fitted` on it, if any (see [`QuantiserReplay`]).
+    pub fn quantisers(&self, fitted: &[(Component, Vec<f64>)]) -> Vec<Option<QuantiserReplay>> {
+        (0..self.measured.len())
+            .map(|c| self.quantiser_on(fitted, c))
+            .collect()
+    }
+
+    fn quantiser_on(&self, fitted: &[(Component, Vec<f64>)], c: usize) -> Option<QuantiserReplay> {
         let on_c = |comp: &Component| matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c);
         let (_, v) = fitted.iter().find(|(comp, _)| on_c(comp))?;
         let parameters = (
@@ -711,10 +722,17 @@ impl<'a> Problem<'a> {
     /// predicts ([`quantised_variance`] of its input, floored at half the noise variance):
     /// between thresholds the reading is certain, on one it is a coin flip between two
     /// steps, so one variance for the channel misjudges both (`None` without a quantiser).
-    pub fn predicted_variances(&self, fitted: &[(Component, Vec<f64>)]) -> Vec<Option<Vec<f64>>> {
-        (0..self.measured.len())
-            .map(|c| {
-                let ((q, s), input) = self.quantiser_on(fitted, c)?;
+    /// `quantisers` is [`Problem::quantisers`] of the candidate's components.
+    pub fn predicted_variances(
+        &self,
+        quantisers: &[Option<QuantiserReplay>],
+    ) -> Vec<Option<Vec<f64>>> {
+        quantisers
+            .iter()
+            .enumerate()
+            .map(|(c, quantiser)| {
+                let ((q, s), input) = quantiser.as_ref()?;
+                let (q, s) = (*q, *s);
                 let floor = 0.5 * self.sigma[c] * self.sigma[c];
                 Some(
                     input
@@ -802,8 +820,10 @@ impl<'a> Problem<'a> {
         let fitted = assemble(components, &dims, &theta);
         let sim = self.predict(&fitted).ok()?;
         let before = self.gap(&self.nominal);
-        let after = self.gap_of(&sim, &fitted);
-        let predicted = self.predicted_variances(&fitted);
+        // One replay without each quantiser, shared by the gap and the score.
+        let quantisers = self.quantisers(&fitted);
+        let after = self.gap_of(&sim, &quantisers);
+        let predicted = self.predicted_variances(&quantisers);
         let nominal_score = self.held_out_score(&self.nominal, 0, &[]);
         let absolute = self.held_out_score(&sim, dims.len(), &predicted);
         let names: Vec<String> = components.iter().map(|c| self.component_name(c)).collect();
