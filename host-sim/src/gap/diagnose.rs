@@ -3,7 +3,7 @@
 
 use crate::dataio::{Recording, read_recording};
 use crate::error::SimError;
-use crate::gap::analysis::{WhereReport, analyse};
+use crate::gap::analysis::{ALPHA, WhereReport, analyse};
 use crate::gap::effects::{Component, Evaluation, Problem, flat_values};
 use crate::gap::meta::{GapMeta, read_gap_meta};
 use crate::gap::plant::{BUILTIN_PLANTS, GapPlant, PlantData, Simulation, builtin_plant};
@@ -646,13 +646,16 @@ pub fn decide(
         .collect();
     let mut fitted_pairs: Vec<Evaluation> = pairs
         .par_iter()
-        .filter_map(|(c, s)| problem.fit(c, Some(s)))
+        .filter_map(|(c, s)| problem.refine(c, s))
         .collect();
     fitted_pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
+    // A pair is the more flexible model: it must also leave noise in every held-out block
+    // (two effects can mimic a third one on average but not block by block).
     if let Some(pair) = fitted_pairs.first()
         && explains(pair)
         && pair.score >= best.score + MIN_SCORE
         && pair.shrink >= best.shrink + 0.1
+        && pair.worst_block_p >= ALPHA
     {
         return (pair.effect.clone(), evaluated, fitted_pairs);
     }

@@ -11,6 +11,9 @@
 //! from the training residuals) minus `k/2 ln n_train` (BIC-like).
 
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
+use crate::gap::stats::{holm, variance_ratio_p};
+use argmin::core::{CostFunction, Executor, State};
+use argmin::solver::neldermead::NelderMead;
 use serde::Serialize;
 
 /// A fitted quantiser on one channel: its `(step, offset)` and its input, the candidate's
@@ -316,6 +319,9 @@ pub struct Evaluation {
     pub truth_error_before: Option<f64>,
     /// The same with the fitted effect.
     pub truth_error_after: Option<f64>,
+    /// Holm-adjusted p-value of the held-out block (and channel) whose residual variance
+    /// exceeds the noise the most (see [`Problem::worst_block_p`]).
+    pub worst_block_p: f64,
     /// Training cost at the fit (sum of squared standardised residuals).
     #[serde(skip)]
     pub train_cost: f64,
@@ -604,6 +610,49 @@ impl<'a> Problem<'a> {
         total.sqrt()
     }
 
+    /// Whether the residual `sim` leaves is noise block by block: for every contiguous
+    /// held-out block and channel, the p-value that its mean squared standardised residual
+    /// exceeds 1 (against the quantiser's predicted variance where one is fitted, as in
+    /// [`Problem::gap_of`]); returns the smallest, Holm-adjusted over all of them.
+    pub fn worst_block_p(&self, sim: &Simulation, quantisers: &[Option<QuantiserReplay>]) -> f64 {
+        let mut blocks: Vec<(usize, usize)> = Vec::new();
+        for (k, &held) in self.test.iter().enumerate() {
+            match blocks.last_mut() {
+                Some((_, end)) if held && *end == k => *end = k + 1,
+                _ if held => blocks.push((k, k + 1)),
+                _ => {}
+            }
+        }
+        let mut p = Vec::new();
+        for (c, (y, m)) in self.measured.iter().zip(&sim.outputs).enumerate() {
+            let s2 = self.sigma[c] * self.sigma[c];
+            let quantiser = quantisers.get(c).and_then(Option::as_ref);
+            for &(a, b) in &blocks {
+                let (mut acc, mut n) = (0.0, 0usize);
+                for k in a..b {
+                    let r = y[k] - m[k];
+                    if !r.is_finite() {
+                        continue;
+                    }
+                    let var = match quantiser {
+                        Some(((q, s), input)) => s2.max(quantised_variance(input[k], *q, *s)),
+                        None => s2,
+                    };
+                    acc += r * r / var;
+                    n += 1;
+                }
+                if n > 0 {
+                    p.push(variance_ratio_p(
+                        acc / n as f64,
+                        n as f64,
+                        self.sigma_dof[c],
+                    ));
+                }
+            }
+        }
+        holm(&p).into_iter().fold(1.0, f64::min)
+    }
+
     /// The smallest held-out gap that noise cannot produce: three standard deviations of
     /// `sum_c (MSE_c / sigma_c^2 - 1)` when the model is right (each term has variance
     /// `2 / n_c + 2 / dof_c`, the held-out count and the noise estimate's degrees of
@@ -782,16 +831,21 @@ impl<'a> Problem<'a> {
     /// Fits `components` (starting from `start` when given, else from the grid) and scores
     /// them on the held-out blocks.
     pub fn fit(&self, components: &[Component], start: Option<&[f64]>) -> Option<Evaluation> {
-        self.fit_from(components, start, 0)
+        self.fit_with(components, start, false)
     }
 
-    /// [`Problem::fit`] that keeps the first `frozen` parameters at their start values
-    /// (the forward step of the pair search: the best single effect held, a second added).
-    pub fn fit_from(
+    /// [`Problem::fit`] from `start`, then polished jointly by Nelder-Mead: a pair's
+    /// parameters can trade off along a valley (a leak area against a seal stiffness) that
+    /// coordinate passes crawl along.
+    pub fn refine(&self, components: &[Component], start: &[f64]) -> Option<Evaluation> {
+        self.fit_with(components, Some(start), true)
+    }
+
+    fn fit_with(
         &self,
         components: &[Component],
         start: Option<&[f64]>,
-        frozen: usize,
+        polish: bool,
     ) -> Option<Evaluation> {
         let dims = self.dims(components);
         let mut theta: Vec<f64> = match start {
@@ -801,18 +855,21 @@ impl<'a> Problem<'a> {
         // From a start (pairs refined from their singles' fits): one coarser pass.
         let (passes, grid, golden) = match (dims.len(), start.is_some()) {
             (_, true) => (1, 7, 10),
-            (1, false) => (1, 13, 16),
-            _ => (2, 13, 16),
+            (1, false) => (1, 13, 32),
+            _ => (2, 13, 32),
         };
         let mut best = self.cost_at(components, &dims, &theta);
         for _ in 0..passes {
-            for i in frozen.min(dims.len())..dims.len() {
+            for i in 0..dims.len() {
                 let (value, cost) = self.line_search(components, &dims, &theta, i, grid, golden);
                 if cost < best {
                     best = cost;
                     theta[i] = value;
                 }
             }
+        }
+        if polish && dims.len() >= 2 && best.is_finite() {
+            (theta, best) = self.polish(components, &dims, theta, best);
         }
         if !best.is_finite() {
             return None;
@@ -853,12 +910,61 @@ impl<'a> Problem<'a> {
             },
             truth_error_before: self.truth_error(&self.nominal),
             truth_error_after: self.truth_error(&sim),
+            worst_block_p: self.worst_block_p(&sim, &quantisers),
             train_cost: best,
             absolute_score: absolute,
             batch_ll: self.held_out_batches(&sim, &predicted),
             channel_rss: self.rss_split(&sim),
             fitted,
         })
+    }
+
+    /// Nelder-Mead on the unit cube from `theta` (cost `best`); returns the better of the two.
+    fn polish(
+        &self,
+        components: &[Component],
+        dims: &[Dim],
+        theta: Vec<f64>,
+        best: f64,
+    ) -> (Vec<f64>, f64) {
+        let start: Vec<f64> = dims
+            .iter()
+            .zip(&theta)
+            .map(|(d, v)| to_unit(d, *v))
+            .collect();
+        let mut simplex = vec![start.clone()];
+        for i in 0..start.len() {
+            let mut v = start.clone();
+            v[i] += if v[i] > 1.0 - POLISH_STEP {
+                -POLISH_STEP
+            } else {
+                POLISH_STEP
+            };
+            simplex.push(v);
+        }
+        let cost = UnitCost {
+            problem: self,
+            components,
+            dims,
+        };
+        let run = NelderMead::new(simplex)
+            .with_sd_tolerance(POLISH_TOLERANCE)
+            .and_then(|solver| {
+                Executor::new(cost, solver)
+                    .configure(|s| s.max_iters(POLISH_ITERS))
+                    .run()
+            });
+        let Ok(result) = run else {
+            return (theta, best);
+        };
+        let state = result.state();
+        match state.get_best_param() {
+            Some(u) if state.get_best_cost() < best => (
+                dims.iter().zip(u).map(|(d, u)| to_value(d, *u)).collect(),
+                state.get_best_cost(),
+            ),
+            _ => (theta, best),
+        }
     }
 
     /// Coordinate `i`: a `grid`-point grid over its range, then `golden` golden-section
@@ -1030,6 +1136,49 @@ fn batch_separation(a: &Evaluation, b: &Evaluation) -> f64 {
 }
 
 /// Maps `u` in [0, 1] to the parameter's range.
+/// Nelder-Mead's first simplex edge (unit-cube coordinates).
+const POLISH_STEP: f64 = 0.02;
+/// Stop when the simplex's costs agree to this std (noise-weighted squares).
+const POLISH_TOLERANCE: f64 = 1e-3;
+/// At most this many Nelder-Mead iterations.
+const POLISH_ITERS: u64 = 150;
+
+/// The training cost on the unit cube; outside it, the cost at the nearest face plus a
+/// steep penalty, so the simplex comes back.
+struct UnitCost<'p, 'a> {
+    problem: &'p Problem<'a>,
+    components: &'p [Component],
+    dims: &'p [Dim],
+}
+
+impl CostFunction for UnitCost<'_, '_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, u: &Vec<f64>) -> Result<f64, argmin::core::Error> {
+        let outside: f64 = u.iter().map(|v| (v - v.clamp(0.0, 1.0)).powi(2)).sum();
+        let theta: Vec<f64> = self
+            .dims
+            .iter()
+            .zip(u)
+            .map(|(d, u)| to_value(d, *u))
+            .collect();
+        let c = self.problem.cost_at(self.components, self.dims, &theta);
+        Ok(c + 1e6 * outside * (1.0 + c.abs()))
+    }
+}
+
+fn to_unit(d: &Dim, v: f64) -> f64 {
+    let u = match d.scale {
+        Scale::Linear => (v - d.lo) / (d.hi - d.lo),
+        Scale::Log => (v / d.lo).ln() / (d.hi / d.lo).ln(),
+    };
+    if u.is_finite() {
+        u.clamp(0.0, 1.0)
+    } else {
+        0.5
+    }
+}
+
 fn to_value(d: &Dim, u: f64) -> f64 {
     let u = u.clamp(0.0, 1.0);
     match d.scale {
@@ -1128,6 +1277,7 @@ mod tests {
             shrink: 0.0,
             truth_error_before: None,
             truth_error_after: None,
+            worst_block_p: 1.0,
             train_cost: 0.0,
             absolute_score: score,
             batch_ll: batches,
