@@ -1135,7 +1135,6 @@ fn batch_separation(a: &Evaluation, b: &Evaluation) -> f64 {
     }
 }
 
-/// Maps `u` in [0, 1] to the parameter's range.
 /// Nelder-Mead's first simplex edge (unit-cube coordinates).
 const POLISH_STEP: f64 = 0.02;
 /// Stop when the simplex's costs agree to this std (noise-weighted squares).
@@ -1167,6 +1166,7 @@ impl CostFunction for UnitCost<'_, '_> {
     }
 }
 
+/// The inverse of [`to_value`], clamped to [0, 1].
 fn to_unit(d: &Dim, v: f64) -> f64 {
     let u = match d.scale {
         Scale::Linear => (v - d.lo) / (d.hi - d.lo),
@@ -1179,6 +1179,7 @@ fn to_unit(d: &Dim, v: f64) -> f64 {
     }
 }
 
+/// Maps `u` in [0, 1] to the parameter's range.
 fn to_value(d: &Dim, u: f64) -> f64 {
     let u = u.clamp(0.0, 1.0);
     match d.scale {
