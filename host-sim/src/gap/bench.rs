@@ -1132,6 +1132,7 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
     let shrink = diag
         .ranking
         .iter()
+        .chain(&diag.pairs)
         .find(|e| e.effect == diag.verdict)
         .map_or(0.0, |e| e.shrink);
     Ok(Outcome {
