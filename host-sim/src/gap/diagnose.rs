@@ -7,7 +7,7 @@ use crate::gap::analysis::{ALPHA, WhereReport, analyse};
 use crate::gap::effects::{Component, Evaluation, Problem, flat_values};
 use crate::gap::meta::{GapMeta, read_gap_meta};
 use crate::gap::plant::{BUILTIN_PLANTS, GapPlant, PlantData, Simulation, builtin_plant};
-use crate::gap::stats::noise_std_from_differences;
+use crate::gap::stats::{noise_std_from_differences, second_differences};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -391,14 +391,11 @@ pub fn diagnose_with(
 }
 
 /// The step of the lattice `y` lies on ([`crate::gap::effects::lattice_step`]) when over
-/// half of its second differences are exactly zero (the noise is below the step).
+/// half of its second differences are zero ([`second_differences`]: the noise is below
+/// the step).
 fn still_lattice_step(y: &[f64]) -> Option<f64> {
     let q = crate::gap::effects::lattice_step(y)?;
-    let d2: Vec<f64> = y
-        .windows(3)
-        .filter(|w| w.iter().all(|v| v.is_finite()))
-        .map(|w| w[2] - 2.0 * w[1] + w[0])
-        .collect();
+    let d2 = second_differences(y);
     let zero = d2.iter().filter(|d| **d == 0.0).count();
     (2 * zero > d2.len()).then_some(q)
 }
@@ -710,5 +707,22 @@ mod tests {
         // Continuous values: no lattice.
         let smooth: Vec<f64> = (0..400).map(|k| (0.37 * k as f64).sin()).collect();
         assert_eq!(still_lattice_step(&smooth), None);
+        // A ramp read through a quantiser of step 0.0421 near 630: exact arithmetic gives
+        // zero second differences wherever it crosses one step per sample; floats give 1e-14.
+        let q = 0.042_099_704_062_337_65;
+        let ramp: Vec<f64> = (0..400)
+            .map(|k| q * ((631.87 - 1.1 * q * k as f64) / q).round())
+            .collect();
+        assert!(ramp.windows(3).any(|w| {
+            let d = w[2] - 2.0 * w[1] + w[0];
+            d != 0.0 && d.abs() < 1e-12
+        }));
+        let step = still_lattice_step(&ramp).unwrap();
+        assert!((step - q).abs() < 1e-9, "{step}");
+        let (sigma, _) = crate::gap::stats::noise_std_from_differences(&ramp).unwrap();
+        assert!(
+            sigma > 0.1 * q,
+            "the float residue is no noise level: {sigma}"
+        );
     }
 }

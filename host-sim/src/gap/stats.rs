@@ -142,17 +142,29 @@ pub fn median(values: &[f64]) -> Option<f64> {
     })
 }
 
+/// Second differences `y[k+1] - 2 y[k] + y[k-1]` over finite triples, those below the float
+/// rounding of the signal (1e-9 of its largest magnitude) set to exactly 0: a staircase
+/// computed in floating point (quantised readings `n q + offset` near 600 rad/s) has second
+/// differences of 1e-14 where exact arithmetic has 0.
+pub fn second_differences(y: &[f64]) -> Vec<f64> {
+    let scale = y
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    y.windows(3)
+        .filter(|w| w.iter().all(|v| v.is_finite()))
+        .map(|w| w[2] - 2.0 * w[1] + w[0])
+        .map(|d| if d.abs() <= 1e-9 * scale { 0.0 } else { d })
+        .collect()
+}
+
 /// Sensor-noise std estimated from the data alone: the MAD of second differences
 /// (`var(y[k+1] - 2 y[k] + y[k-1]) = 6 sigma^2` for white noise; the signal's own
 /// curvature is negligible at the sample rate, and the median ignores transients). Falls
 /// back to the plain std of the differences when more than half are zero (quantised data).
 /// Returns the estimate and its effective degrees of freedom (the MAD's efficiency is 37 %).
 pub fn noise_std_from_differences(y: &[f64]) -> Option<(f64, f64)> {
-    let d2: Vec<f64> = y
-        .windows(3)
-        .filter(|w| w.iter().all(|v| v.is_finite()))
-        .map(|w| w[2] - 2.0 * w[1] + w[0])
-        .collect();
+    let d2 = second_differences(y);
     if d2.len() < 10 {
         return None;
     }
