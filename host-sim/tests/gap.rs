@@ -416,3 +416,23 @@ fn gap_finds_torque_ripple_while_the_model_speed_is_off() {
     assert_eq!(o.verdict, "torque_ripple", "top 3: {:?}", o.top3);
     assert!(o.shrink > 0.9, "{}", o.shrink);
 }
+
+#[test]
+fn gap_finds_a_clip_of_the_one_peak_by_swapping_the_folds() {
+    // The clipped peak lies in a held-out block, so the training blocks show nothing to
+    // fit and the first fold answers `unknown`; fitted on the odd blocks, the clip is found.
+    let dir = scratch("clip");
+    let d = one("scooter", "output_saturation", 4.0);
+    let (_, v) = diagnose(&dir, &d);
+    let effect = format!(
+        "output_saturation:{}",
+        d.label.channel.as_deref().unwrap().trim_start_matches("y:")
+    );
+    assert_eq!(
+        v["verdict"],
+        effect.as_str(),
+        "{}",
+        v["ranking"][0]["effect"]
+    );
+    assert_eq!(v["held_out_blocks"], "even (from 2)");
+}

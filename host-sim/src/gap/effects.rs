@@ -236,6 +236,7 @@ struct Dim {
 }
 
 /// Everything the candidates are fitted and scored against.
+#[derive(Clone)]
 pub struct Problem<'a> {
     /// The plant.
     pub plant: &'a dyn GapPlant,

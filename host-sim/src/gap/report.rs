@@ -60,10 +60,11 @@ fn summary_lines(d: &Diagnosis) -> Vec<String> {
         ));
     }
     out.push(format!(
-        "samples: {} ({} training, {} held out); noise: {}",
+        "samples: {} ({} training, {} held out: the {} blocks); noise: {}",
         d.samples[0],
         d.samples[1],
         d.samples[2],
+        d.held_out_blocks,
         d.noise
             .iter()
             .map(|n| format!("{} {:.4e} ({})", n.channel, n.std, n.source))
