@@ -23,16 +23,28 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-fn one(plant: &str, effect: &str, ratio: f64) -> Dataset {
+/// Generated sets of one plant, one seed per cell: the single-effect sets of `only` (every
+/// catalogue effect when empty) at `ratios`, and `extra_sets` of each other kind.
+fn generated(
+    plant: &str,
+    only: &[&str],
+    ratios: &[f64],
+    seed: u64,
+    extra_sets: usize,
+) -> Vec<Dataset> {
     let opts = BenchOptions {
         plants: vec![plant.into()],
         seeds: 1,
-        ratios: vec![ratio],
-        seed: 7,
-        only: vec![effect.into()],
-        extra_sets: 0,
+        ratios: ratios.to_vec(),
+        seed,
+        only: only.iter().map(|e| e.to_string()).collect(),
+        extra_sets,
     };
-    generate(plant, &opts).unwrap().remove(0)
+    generate(plant, &opts).unwrap()
+}
+
+fn one(plant: &str, effect: &str, ratio: f64) -> Dataset {
+    generated(plant, &[effect], &[ratio], 7, 0).remove(0)
 }
 
 fn write(dir: &Path, d: &Dataset) -> PathBuf {
@@ -51,6 +63,13 @@ fn diagnose(dir: &Path, d: &Dataset) -> (PathBuf, serde_json::Value) {
     let verdict =
         serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
     (out, verdict)
+}
+
+/// Runs `prognos gap` on `data` with the meta file `meta` into `out` and parses the verdict.
+fn gap_with_meta(data: &Path, meta: &Path, out: &Path) -> serde_json::Value {
+    let o = prognos(&["gap", "--data", s(data), "--meta", s(meta), "--out", s(out)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap()
 }
 
 #[test]
@@ -84,15 +103,7 @@ fn gap_finds_lubricant_torque_noise_in_wheel_data_and_writes_the_report() {
 #[test]
 fn gap_says_none_on_nominal_motor_data() {
     // `only` naming no effect leaves only the extra sets.
-    let opts = BenchOptions {
-        plants: vec!["dc_motor".into()],
-        seeds: 1,
-        ratios: vec![],
-        seed: 7,
-        only: vec!["no-such-effect".into()],
-        extra_sets: 1,
-    };
-    let sets = generate("dc_motor", &opts).unwrap();
+    let sets = generated("dc_motor", &["no-such-effect"], &[], 7, 1);
     let none = sets
         .iter()
         .find(|x| x.label.kind == CaseKind::None)
@@ -235,20 +246,18 @@ fn bad_input_exits_2_and_says_which_and_where() {
 fn small_gap_bench_attributes_localises_and_rejects() {
     // Bounded: DC motor, two catalogue effects and two sensor effects at ratio 4, one seed,
     // plus one no-effect set, one pair and one set per out-of-catalogue effect.
-    let opts = BenchOptions {
-        plants: vec!["dc_motor".into()],
-        seeds: 1,
-        ratios: vec![4.0],
-        seed: 11,
-        only: vec![
-            "coulomb_friction".into(),
-            "brush_drop".into(),
-            "sensor_scale".into(),
-            "measurement_delay".into(),
+    let sets = generated(
+        "dc_motor",
+        &[
+            "coulomb_friction",
+            "brush_drop",
+            "sensor_scale",
+            "measurement_delay",
         ],
-        extra_sets: 1,
-    };
-    let sets = generate("dc_motor", &opts).unwrap();
+        &[4.0],
+        11,
+        1,
+    );
     assert_eq!(
         sets.iter()
             .filter(|d| d.label.kind == CaseKind::Single)
@@ -297,19 +306,7 @@ fn gap_recovers_the_isentropic_critical_ratio_from_progpy_data() {
             ),
         )
         .unwrap();
-        let out = dir.join(name);
-        let o = prognos(&[
-            "gap",
-            "--data",
-            s(&data),
-            "--meta",
-            s(&meta),
-            "--out",
-            s(&out),
-        ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let text = std::fs::read_to_string(out.join("verdict.json")).unwrap();
-        serde_json::from_str::<serde_json::Value>(&text).unwrap()
+        gap_with_meta(&data, &meta, &dir.join(name))
     };
     let v = told("unchoked", "critical_pressure_ratio = 0\n");
     assert_eq!(v["verdict"], "choked_flow", "{:#}", v["ranking"][0]);
@@ -340,15 +337,7 @@ fn gap_recovers_the_isentropic_critical_ratio_from_progpy_data() {
 fn gap_says_unknown_for_an_inlet_sensor_offset_a_stiffer_spring_would_fit() {
     // A weakening spring only weakens: the pair spring_weakening (k above the model's)
     // + sensor_scale:q that explained this set is no physical explanation.
-    let opts = BenchOptions {
-        plants: vec!["valve".into()],
-        seeds: 1,
-        ratios: vec![4.0],
-        seed: 7,
-        only: vec!["spring_weakening".into()],
-        extra_sets: 1,
-    };
-    let sets = generate("valve", &opts).unwrap();
+    let sets = generated("valve", &["spring_weakening"], &[4.0], 7, 1);
     let d = sets
         .iter()
         .find(|d| {
@@ -372,15 +361,7 @@ fn gap_says_unknown_for_an_inlet_sensor_offset_a_stiffer_spring_would_fit() {
 fn gap_finds_a_leak_and_seal_pair_whose_parameters_trade_off() {
     // Leak area and seal stiffness trade off along a valley that one coordinate pass
     // crawls along (shrink 0.66, verdict `unknown`); the joint polish reaches the pair.
-    let opts = BenchOptions {
-        plants: vec!["valve".into()],
-        seeds: 1,
-        ratios: vec![4.0],
-        seed: 7,
-        only: vec!["friction_increase".into()],
-        extra_sets: 1,
-    };
-    let sets = generate("valve", &opts).unwrap();
+    let sets = generated("valve", &["friction_increase"], &[4.0], 7, 1);
     let d = sets
         .iter()
         .find(|d| d.label.kind == CaseKind::Pair)
@@ -399,15 +380,7 @@ fn gap_finds_a_leak_and_seal_pair_whose_parameters_trade_off() {
 fn gap_finds_torque_ripple_while_the_model_speed_is_off() {
     // The set of the session-9 wm1 bench: the ripple's phase came from the replayed speed,
     // so its fit shrank the gap by 0.64 only and the verdict was `unknown`.
-    let opts = BenchOptions {
-        plants: vec!["reaction_wheel".into()],
-        seeds: 1,
-        ratios: vec![2.0, 4.0],
-        seed: 2026,
-        only: Vec::new(),
-        extra_sets: 0,
-    };
-    let sets = generate("reaction_wheel", &opts).unwrap();
+    let sets = generated("reaction_wheel", &[], &[2.0, 4.0], 2026, 0);
     let d = sets
         .iter()
         .find(|d| d.name == "reaction_wheel-torque_ripple-r4-s0")
@@ -446,19 +419,7 @@ fn gap_finds_both_external_leaks_in_progpy_default_state_trace() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/progpy-valve");
     let data = root.join("nominal_progpy_default_state_dt0.01.csv");
     let meta = root.join("gap/nominal_progpy_default_state_euler.meta.toml");
-    let out = scratch("progpy-leaks").join("out");
-    let o = prognos(&[
-        "gap",
-        "--data",
-        s(&data),
-        "--meta",
-        s(&meta),
-        "--out",
-        s(&out),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
+    let v = gap_with_meta(&data, &meta, &scratch("progpy-leaks").join("out"));
     assert_eq!(v["verdict"], "top_external_leak+bottom_external_leak");
     let pair = v["pairs"]
         .as_array()

@@ -280,16 +280,7 @@ impl BenchPlant for WheelBench {
             .map(|t| 23.0 + 5.0 * (std::f64::consts::TAU * t / 300.0 + temp_phase).sin())
             .collect();
         let mut wheel = TruthWheel::new();
-        wheel.effects = WheelEffects {
-            driver_lowpass: false,
-            emf_limiting: false,
-            speed_limiter: false,
-            coulomb_friction: false,
-            viscous_temperature: false,
-            torque_ripple: false,
-            cogging: false,
-            torque_noise: false,
-        };
+        wheel.effects = WheelEffects::none();
         wheel.noise_phase = noise_phase;
         let frozen_viscous = wheel.params.viscous_coefficient(23.0);
         let (mut defect, mut load_step) = (0.0, 0.0);

@@ -559,13 +559,8 @@ mod tests {
         let mut truth = TruthWheel::new();
         truth.effects = WheelEffects {
             driver_lowpass: true,
-            emf_limiting: false,
-            speed_limiter: false,
             coulomb_friction: true,
-            viscous_temperature: false,
-            torque_ripple: false,
-            cogging: false,
-            torque_noise: false,
+            ..WheelEffects::none()
         };
         truth.settle(3.0, 23.0);
         let (mut i, mut w) = (Vec::new(), Vec::new());
@@ -600,14 +595,9 @@ mod tests {
         let mut data = profile(n);
         let mut truth = TruthWheel::new();
         truth.effects = WheelEffects {
-            driver_lowpass: false,
-            emf_limiting: false,
-            speed_limiter: false,
-            coulomb_friction: false,
-            viscous_temperature: false,
             torque_ripple: true,
             cogging: true,
-            torque_noise: false,
+            ..WheelEffects::none()
         };
         truth.params.torque_ripple = 50.0;
         truth.params.cogging = 1e-3;
@@ -651,14 +641,8 @@ mod tests {
         let record = |ripple: bool| {
             let mut truth = TruthWheel::new();
             truth.effects = WheelEffects {
-                driver_lowpass: false,
-                emf_limiting: false,
-                speed_limiter: false,
-                coulomb_friction: false,
-                viscous_temperature: false,
                 torque_ripple: ripple,
-                cogging: false,
-                torque_noise: false,
+                ..WheelEffects::none()
             };
             truth.params.torque_ripple = 50.0;
             truth.settle(3.0, 23.0);

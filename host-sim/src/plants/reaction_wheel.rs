@@ -45,6 +45,20 @@ impl WheelEffects {
             torque_noise: true,
         }
     }
+
+    /// Every effect off: the nominal wheel.
+    pub const fn none() -> Self {
+        Self {
+            driver_lowpass: false,
+            emf_limiting: false,
+            speed_limiter: false,
+            coulomb_friction: false,
+            viscous_temperature: false,
+            torque_ripple: false,
+            cogging: false,
+            torque_noise: false,
+        }
+    }
 }
 
 /// Temperature at which the viscous coefficient is frozen when `viscous_temperature` is off.
