@@ -107,8 +107,9 @@ pub fn read_recording(path: &Path) -> Result<Recording, SimError> {
 ///
 /// Rules: the first header cell is `t`; every other header cell is `u:`, `y:` or `x:`
 /// followed by a non-empty name, without duplicates; at least one `y:` column. Every row
-/// has as many fields as the header; every field is a number (`NaN` marks a dropped
-/// sample); `t` is finite and strictly increasing. Blank lines are skipped.
+/// has as many fields as the header; every field is a number (`NaN`, or an empty field
+/// outside `t`, marks a dropped sample); `t` is finite and strictly increasing. Blank lines
+/// are skipped.
 pub fn parse_recording(path: &Path, text: &str) -> Result<Recording, SimError> {
     parse_table(path, text, true)
 }
@@ -164,6 +165,11 @@ fn parse_table(path: &Path, text: &str, recording: bool) -> Result<Recording, Si
                 let mut row = Vec::with_capacity(names.len());
                 for (i, raw) in record.iter().enumerate() {
                     let cell = std::str::from_utf8(raw).unwrap_or("\u{fffd}").trim();
+                    if cell.is_empty() && i > 0 {
+                        // A missing sample as pandas and spreadsheets write it.
+                        row.push(f64::NAN);
+                        continue;
+                    }
                     let value: f64 = cell.parse().map_err(|_| {
                         bad(
                             field_offset(i),
@@ -393,6 +399,18 @@ mod tests {
         assert_eq!(rec.series.rows.len(), 3);
         assert_eq!(rec.series.column("x:leak").unwrap(), vec![0.0, 1e-3, 2e-3]);
         assert!(rec.series.rows[1][2].is_nan());
+    }
+
+    #[test]
+    fn an_empty_field_is_a_missing_sample_except_in_t() {
+        let text = "t,u:cmd,y:p\n0,1,2.5\n0.5,, \n1.0,0,2.25\n";
+        let rec = parse_recording(p(), text).unwrap();
+        assert!(rec.series.rows[1][1].is_nan() && rec.series.rows[1][2].is_nan());
+        assert_eq!(rec.series.rows[2], vec![1.0, 0.0, 2.25]);
+        let (line, column, message) =
+            location(parse_recording(p(), "t,y:p\n0,1\n,2\n").unwrap_err());
+        assert_eq!((line, column), (3, 1));
+        assert!(message.contains("`t`"), "{message}");
     }
 
     #[test]
