@@ -369,11 +369,11 @@ pub fn diagnose_with(
         // condition is pinned there; held out, its start transient would be the gap). This
         // second look admits a single effect only: a pair is flexible enough to mimic an
         // effect outside the catalogue on one of two folds.
-        let first_block = n / BLOCKS;
+        let first_block = |k: usize| k * BLOCKS / n == 0;
         let mut swapped = problem.clone();
-        swapped.train = (0..n).map(|k| problem.test[k] || k < first_block).collect();
+        swapped.train = (0..n).map(|k| problem.test[k] || first_block(k)).collect();
         swapped.test = (0..n)
-            .map(|k| problem.train[k] && k >= first_block)
+            .map(|k| problem.train[k] && !first_block(k))
             .collect();
         swapped.refit_nominal();
         let (v, r, p) = decide(&swapped, &report);
