@@ -552,6 +552,20 @@ mod tests {
         d
     }
 
+    /// Runs a settled truth wheel over `command` at 20 Hz: its current, speed and angle at
+    /// each sample, before that sample's step.
+    fn record(truth: &mut TruthWheel, command: &[f64]) -> [Vec<f64>; 3] {
+        truth.settle(command[0], 23.0);
+        let mut out = [Vec::new(), Vec::new(), Vec::new()];
+        for &v in command {
+            out[0].push(truth.current);
+            out[1].push(truth.speed);
+            out[2].push(truth.angle);
+            truth.step(v, 23.0, 0.05);
+        }
+        out
+    }
+
     #[test]
     fn replay_matches_the_truth_plant_with_the_same_effects() {
         let n = 2000;
@@ -562,13 +576,7 @@ mod tests {
             coulomb_friction: true,
             ..WheelEffects::none()
         };
-        truth.settle(3.0, 23.0);
-        let (mut i, mut w) = (Vec::new(), Vec::new());
-        for k in 0..n {
-            i.push(truth.current);
-            w.push(truth.speed);
-            truth.step(data.inputs["command"][k], 23.0, 0.05);
-        }
+        let [i, w, _] = record(&mut truth, &data.inputs["command"]);
         data.outputs.insert("current".into(), i);
         data.outputs.insert("speed".into(), w.clone());
         let plant = WheelGapPlant;
@@ -601,14 +609,7 @@ mod tests {
         };
         truth.params.torque_ripple = 50.0;
         truth.params.cogging = 1e-3;
-        truth.settle(3.0, 23.0);
-        let (mut i, mut w, mut a) = (Vec::new(), Vec::new(), Vec::new());
-        for k in 0..n {
-            i.push(truth.current);
-            w.push(truth.speed);
-            a.push(truth.angle);
-            truth.step(data.inputs["command"][k], 23.0, 0.05);
-        }
+        let [i, w, a] = record(&mut truth, &data.inputs["command"]);
         data.outputs.insert("current".into(), i);
         data.outputs.insert("speed".into(), w.clone());
         data.inputs.insert("angle".into(), a);
@@ -638,24 +639,17 @@ mod tests {
         // the ripple it adds must still be the truth's (phase from the measured angle).
         let n = 3000;
         let mut data = profile(n);
-        let record = |ripple: bool| {
+        let run = |ripple: bool| {
             let mut truth = TruthWheel::new();
             truth.effects = WheelEffects {
                 torque_ripple: ripple,
                 ..WheelEffects::none()
             };
             truth.params.torque_ripple = 50.0;
-            truth.settle(3.0, 23.0);
-            let (mut w, mut a) = (Vec::new(), Vec::new());
-            for k in 0..n {
-                w.push(truth.speed);
-                a.push(truth.angle);
-                truth.step(data.inputs["command"][k], 23.0, 0.05);
-            }
-            (w, a)
+            record(&mut truth, &data.inputs["command"])
         };
-        let (with, angle) = record(true);
-        let (without, _) = record(false);
+        let [_, with, angle] = run(true);
+        let [_, without, _] = run(false);
         data.outputs.insert("speed".into(), with.clone());
         data.inputs.insert("angle".into(), angle);
         let plant = WheelGapPlant;
