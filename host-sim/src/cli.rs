@@ -176,6 +176,10 @@ pub enum Command {
         /// Per plant: no-effect sets, pair sets, and sets per out-of-catalogue effect.
         #[arg(long, default_value_t = 12)]
         extra_sets: usize,
+        /// Input profile of the generated records: `steps` (held levels) or `smooth` (sums
+        /// of slow sinusoids; valve: other hold times and a drifting supply).
+        #[arg(long, value_enum, default_value_t = crate::gap::bench::Excitation::Steps)]
+        excitation: crate::gap::bench::Excitation,
         /// Diagnose the labelled datasets in this folder instead of generating.
         #[arg(long)]
         datasets: Option<PathBuf>,
@@ -501,6 +505,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             seed,
             only,
             extra_sets,
+            excitation,
             datasets,
             write_datasets,
             out,
@@ -512,6 +517,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 seed,
                 only,
                 extra_sets,
+                excitation,
             };
             let started = Instant::now();
             let (_, text) = crate::gap::bench::run_bench(

@@ -39,6 +39,7 @@ fn generated(
         seed,
         only: only.iter().map(|e| e.to_string()).collect(),
         extra_sets,
+        ..BenchOptions::default()
     };
     generate(plant, &opts).unwrap()
 }

@@ -170,6 +170,47 @@ pub struct BenchOptions {
     /// Datasets of each extra kind per plant: this many with no effect, this many pairs,
     /// and this many per out-of-catalogue effect (ratios cycling 2, 4, 8).
     pub extra_sets: usize,
+    /// Input profile of the generated records.
+    pub excitation: Excitation,
+}
+
+/// How the bench excites its truth plants. The diagnoser was developed on `Steps`; `Smooth`
+/// is a second input family (sums of slow sinusoids, other valve timings and supply
+/// pressures) that checks nothing was tuned to the staircases.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Excitation {
+    /// Piecewise-constant commands held for a random time (the bench's default).
+    #[default]
+    Steps,
+    /// Sums of sinusoids with random periods and phases (valve: shorter and longer holds,
+    /// drifting supply pressure).
+    Smooth,
+}
+
+/// `mean + amplitude * s(t)` where `s` is a sum of `count` sinusoids with log-uniform
+/// periods in `periods` and random phases, normalised to a peak of 1 over the record.
+fn smooth_signal(
+    rng: &mut SimRng,
+    t: &[f64],
+    mean: f64,
+    amplitude: f64,
+    periods: (f64, f64),
+    count: usize,
+) -> Vec<f64> {
+    let tones: Vec<(f64, f64, f64)> = (0..count)
+        .map(|_| {
+            let period = (periods.0.ln() + uniform(rng) * (periods.1.ln() - periods.0.ln())).exp();
+            let weight = 0.5 + uniform(rng);
+            let phase = std::f64::consts::TAU * uniform(rng);
+            (std::f64::consts::TAU / period, weight, phase)
+        })
+        .collect();
+    let raw: Vec<f64> = t
+        .iter()
+        .map(|&t| tones.iter().map(|(w, a, p)| a * (w * t + p).sin()).sum())
+        .collect();
+    let peak = raw.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12);
+    raw.iter().map(|v| mean + amplitude * v / peak).collect()
 }
 
 impl Default for BenchOptions {
@@ -186,6 +227,7 @@ impl Default for BenchOptions {
             seed: 2026,
             only: Vec::new(),
             extra_sets: 12,
+            excitation: Excitation::Steps,
         }
     }
 }
@@ -218,7 +260,9 @@ trait BenchPlant: Sync {
     }
 }
 
-struct WheelBench;
+struct WheelBench {
+    excitation: Excitation,
+}
 
 /// Truth sub-steps per 20 Hz sample.
 const WHEEL_SUBSTEPS: usize = 20;
@@ -261,20 +305,29 @@ impl BenchPlant for WheelBench {
         let dt = self.dt();
         let n = 6000usize;
         let mut rng = stream_rng(seed, 11);
-        let hold = (25.0 / dt) as usize;
-        let levels: Vec<f64> = (0..n.div_ceil(hold))
-            .map(|i| {
-                if i == 0 {
-                    2.0 + 2.5 * uniform(&mut rng)
-                } else {
-                    -4.5 + 9.0 * uniform(&mut rng)
-                }
-            })
-            .collect();
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let command: Vec<f64> = match self.excitation {
+            Excitation::Steps => {
+                let hold = (25.0 / dt) as usize;
+                let levels: Vec<f64> = (0..n.div_ceil(hold))
+                    .map(|i| {
+                        if i == 0 {
+                            2.0 + 2.5 * uniform(&mut rng)
+                        } else {
+                            -4.5 + 9.0 * uniform(&mut rng)
+                        }
+                    })
+                    .collect();
+                (0..n).map(|k| levels[k / hold]).collect()
+            }
+            // Slow sweeps through zero speed and back (the staircase rarely crosses zero).
+            Excitation::Smooth => {
+                let mean = -1.5 + 3.0 * uniform(&mut rng);
+                smooth_signal(&mut rng, &t, mean, 4.0, (40.0, 400.0), 4)
+            }
+        };
         let temp_phase = std::f64::consts::TAU * uniform(&mut rng);
         let noise_phase = std::f64::consts::TAU * uniform(&mut rng);
-        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
-        let command: Vec<f64> = (0..n).map(|k| levels[k / hold]).collect();
         let temperature: Vec<f64> = t
             .iter()
             .map(|t| 23.0 + 5.0 * (std::f64::consts::TAU * t / 300.0 + temp_phase).sin())
@@ -315,6 +368,14 @@ impl BenchPlant for WheelBench {
             1
         };
         wheel.settle(command[0], temperature[0]);
+        if wheel.effects.emf_limiting || wheel.effects.speed_limiter {
+            // `settle` ignores the limiters: let them pull the wheel to its limited state
+            // first, or the record opens with a snap from a state the wheel never reaches.
+            for _ in 0..(20.0 / dt) as usize * substeps {
+                wheel.step(command[0], temperature[0], dt / substeps as f64);
+            }
+            wheel.time = 0.0;
+        }
         let (mut current, mut speed, mut angle) = (Vec::new(), Vec::new(), Vec::new());
         let inertia = wheel.params.inertia;
         let omega_d = std::f64::consts::TAU * 0.7;
@@ -349,7 +410,9 @@ impl BenchPlant for WheelBench {
     }
 }
 
-struct MotorBench;
+struct MotorBench {
+    excitation: Excitation,
+}
 
 impl BenchPlant for MotorBench {
     fn plant(&self) -> &'static str {
@@ -380,24 +443,32 @@ impl BenchPlant for MotorBench {
         let dt = self.dt();
         let n = 2000usize;
         let mut rng = stream_rng(seed, 12);
-        let hold = (1.0 / dt) as usize;
-        let levels: Vec<f64> = (0..n.div_ceil(hold))
-            .map(|_| -12.0 + 24.0 * uniform(&mut rng))
-            .collect();
-        let load_levels: Vec<f64> = (0..n.div_ceil(2 * hold))
-            .map(|_| 0.02 * uniform(&mut rng))
-            .collect();
         let mut data = PlantData {
             dt,
             ..Default::default()
         };
         data.t = (0..n).map(|k| k as f64 * dt).collect();
-        data.inputs
-            .insert("voltage".into(), (0..n).map(|k| levels[k / hold]).collect());
-        data.inputs.insert(
-            "load_torque".into(),
-            (0..n).map(|k| load_levels[k / (2 * hold)]).collect(),
-        );
+        let (voltage, load): (Vec<f64>, Vec<f64>) = match self.excitation {
+            Excitation::Steps => {
+                let hold = (1.0 / dt) as usize;
+                let levels: Vec<f64> = (0..n.div_ceil(hold))
+                    .map(|_| -12.0 + 24.0 * uniform(&mut rng))
+                    .collect();
+                let load_levels: Vec<f64> = (0..n.div_ceil(2 * hold))
+                    .map(|_| 0.02 * uniform(&mut rng))
+                    .collect();
+                (
+                    (0..n).map(|k| levels[k / hold]).collect(),
+                    (0..n).map(|k| load_levels[k / (2 * hold)]).collect(),
+                )
+            }
+            Excitation::Smooth => (
+                smooth_signal(&mut rng, &data.t, 0.0, 12.0, (0.4, 6.0), 5),
+                smooth_signal(&mut rng, &data.t, 0.01, 0.01, (2.0, 15.0), 2),
+            ),
+        };
+        data.inputs.insert("voltage".into(), voltage);
+        data.inputs.insert("load_torque".into(), load);
         let mut params = DcMotorPlant.default_params();
         let mut active = Vec::new();
         let (mut ripple, mut step) = (0.0, 0.0);
@@ -424,7 +495,9 @@ impl BenchPlant for MotorBench {
     }
 }
 
-struct ValveBench;
+struct ValveBench {
+    excitation: Excitation,
+}
 
 impl BenchPlant for ValveBench {
     fn plant(&self) -> &'static str {
@@ -478,8 +551,12 @@ impl BenchPlant for ValveBench {
         let mut open = vec![false; n];
         let mut k = (2.0 / dt) as usize;
         let mut state = true;
+        let (hold_min, hold_span) = match self.excitation {
+            Excitation::Steps => (3.0, 3.0),
+            Excitation::Smooth => (1.5, 7.5),
+        };
         while k < n {
-            let hold = ((3.0 + 3.0 * uniform(&mut rng)) / dt) as usize;
+            let hold = ((hold_min + hold_span * uniform(&mut rng)) / dt) as usize;
             for o in open.iter_mut().skip(k).take(hold) {
                 *o = state;
             }
@@ -493,7 +570,14 @@ impl BenchPlant for ValveBench {
             ..Default::default()
         };
         data.t = (0..n).map(|k| k as f64 * dt).collect();
-        data.inputs.insert("pl".into(), vec![pl; n]);
+        let supply = match self.excitation {
+            Excitation::Steps => vec![pl; n],
+            // The supply sags and recovers by up to 15 % over the record.
+            Excitation::Smooth => {
+                smooth_signal(&mut rng, &data.t, pl, 0.15 * (pl - pr), (30.0, 120.0), 2)
+            }
+        };
+        data.inputs.insert("pl".into(), supply);
         data.inputs.insert("pr".into(), vec![pr; n]);
         data.inputs.insert(
             "top_port_supply".into(),
@@ -543,7 +627,9 @@ impl BenchPlant for ValveBench {
     }
 }
 
-struct ScooterBench;
+struct ScooterBench {
+    excitation: Excitation,
+}
 
 impl BenchPlant for ScooterBench {
     fn plant(&self) -> &'static str {
@@ -581,18 +667,24 @@ impl BenchPlant for ScooterBench {
         let mut rng = stream_rng(seed, 15);
         // Driver input held 2-4 s at levels in [-1, 3] V (reversals exercise the dry
         // friction's sign), starting from rest.
-        let mut voltage = Vec::with_capacity(n);
-        while voltage.len() < n {
-            let hold = ((2.0 + 2.0 * uniform(&mut rng)) / dt) as usize;
-            let level = -1.0 + 4.0 * uniform(&mut rng);
-            voltage.extend(std::iter::repeat_n(level, hold));
-        }
-        voltage.truncate(n);
         let mut data = PlantData {
             dt,
             ..Default::default()
         };
         data.t = (0..n).map(|k| k as f64 * dt).collect();
+        let voltage = match self.excitation {
+            Excitation::Steps => {
+                let mut voltage = Vec::with_capacity(n);
+                while voltage.len() < n {
+                    let hold = ((2.0 + 2.0 * uniform(&mut rng)) / dt) as usize;
+                    let level = -1.0 + 4.0 * uniform(&mut rng);
+                    voltage.extend(std::iter::repeat_n(level, hold));
+                }
+                voltage.truncate(n);
+                voltage
+            }
+            Excitation::Smooth => smooth_signal(&mut rng, &data.t, 1.0, 2.0, (2.0, 20.0), 4),
+        };
         data.inputs.insert("voltage".into(), voltage);
         let mut params = ScooterGapPlant.default_params();
         let (mut grade, mut ripple) = (0.0, 0.0);
@@ -805,16 +897,20 @@ fn spec_enr(bp: &dyn BenchPlant, seed: u64, base: &Clean, spec: &Spec) -> (f64, 
 }
 
 /// What the user's model predicts for a noise-free run with plant effects: the nominal gap
-/// plant replayed over the run's inputs from its first samples. A plant effect's ratio is
-/// measured against it rather than against the truth's own run without the effect, which
-/// may start from another state (a truth that settles under a speed limiter starts slower):
-/// that difference is not in the data the diagnoser sees.
+/// plant replayed over the run's inputs from its first sample, with the initial state then
+/// refitted by least squares as the diagnoser does. A plant effect's ratio is measured
+/// against it rather than against the truth's own run without the effect, which may start
+/// from another state (a truth that settles under a speed limiter starts slower), and
+/// whatever a free initial state absorbs (an effect that acts only in the first seconds of
+/// a slow wheel) is no gap the diagnoser can see either.
 fn visible_reference(bp: &dyn BenchPlant, clean: &Clean) -> Option<Vec<Vec<f64>>> {
     let plant = crate::gap::plant::builtin_plant(bp.plant())?;
     let mut data = PlantData {
         t: clean.t.clone(),
         dt: bp.dt(),
-        initial_window: plant.initial_window(),
+        // The clean run's own first sample: a window fit would be off by the curvature of
+        // a record that starts in a transient.
+        initial_window: 0.0,
         ..Default::default()
     };
     data.inputs = clean.inputs.iter().cloned().collect();
@@ -829,15 +925,64 @@ fn visible_reference(bp: &dyn BenchPlant, clean: &Clean) -> Option<Vec<Vec<f64>>
         params.insert(name.to_string(), v);
     }
     let active = plant.model_effects(&params);
-    let sim = plant.simulate(&params, &active, &data).ok()?;
     let all = plant.outputs();
-    bp.outputs()
-        .iter()
-        .map(|o| {
-            let i = all.iter().position(|a| a == o)?;
-            sim.outputs.get(i).cloned()
-        })
-        .collect()
+    let replay = |data: &PlantData| -> Option<Vec<Vec<f64>>> {
+        let sim = plant.simulate(&params, &active, data).ok()?;
+        bp.outputs()
+            .iter()
+            .map(|o| {
+                let i = all.iter().position(|a| a == o)?;
+                sim.outputs.get(i).cloned()
+            })
+            .collect()
+    };
+    let mut reference = replay(&data)?;
+    let sigma = bp.sigma();
+    let mut columns = Vec::new();
+    for (name, s) in bp.outputs().iter().zip(&sigma) {
+        let step = 10.0 * s;
+        let mut perturbed = data.clone();
+        perturbed.initial_offsets.insert(name.to_string(), step);
+        let Some(shifted) = replay(&perturbed) else {
+            continue;
+        };
+        let g: Vec<Vec<f64>> = shifted
+            .iter()
+            .zip(&reference)
+            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) / step).collect())
+            .collect();
+        let flat = || g.iter().flatten();
+        if flat().any(|v| v.abs() > 1e-6) && flat().all(|v| v.is_finite()) {
+            columns.push(g);
+        }
+    }
+    let m = columns.len();
+    let (mut a, mut b) = (vec![vec![0.0; m]; m], vec![0.0; m]);
+    for (c, y) in clean.outputs.iter().enumerate() {
+        let w = 1.0 / (sigma[c] * sigma[c]);
+        for (k, yk) in y.iter().enumerate() {
+            let r = yk - reference[c][k];
+            if !r.is_finite() {
+                continue;
+            }
+            for p in 0..m {
+                b[p] += w * columns[p][c][k] * r;
+                for q in 0..m {
+                    a[p][q] += w * columns[p][c][k] * columns[q][c][k];
+                }
+            }
+        }
+    }
+    if let Some(delta) = crate::gap::effects::solve_small(a, b) {
+        for (g, d) in columns.iter().zip(delta).filter(|(_, d)| d.is_finite()) {
+            for (out, gc) in reference.iter_mut().zip(g) {
+                for (v, gk) in out.iter_mut().zip(gc) {
+                    *v += d * gk;
+                }
+            }
+        }
+    }
+    Some(reference)
 }
 
 /// One component to place at a target ENR.
@@ -929,19 +1074,19 @@ fn dataset(bp: &dyn BenchPlant, name: String, seed: u64, spec: &Spec, label: Lab
     }
 }
 
-fn bench_plant(name: &str) -> Option<Box<dyn BenchPlant>> {
+fn bench_plant(name: &str, excitation: Excitation) -> Option<Box<dyn BenchPlant>> {
     match name {
-        "reaction_wheel" => Some(Box::new(WheelBench)),
-        "dc_motor" => Some(Box::new(MotorBench)),
-        "valve" => Some(Box::new(ValveBench)),
-        "scooter" => Some(Box::new(ScooterBench)),
+        "reaction_wheel" => Some(Box::new(WheelBench { excitation })),
+        "dc_motor" => Some(Box::new(MotorBench { excitation })),
+        "valve" => Some(Box::new(ValveBench { excitation })),
+        "scooter" => Some(Box::new(ScooterBench { excitation })),
         _ => None,
     }
 }
 
 /// Generates the datasets of one plant.
 pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimError> {
-    let bp = bench_plant(plant)
+    let bp = bench_plant(plant, opts.excitation)
         .ok_or_else(|| SimError::Run(format!("gap-bench has no generator for plant `{plant}`")))?;
     let bp = bp.as_ref();
     let n_out = bp.outputs().len();

@@ -272,7 +272,7 @@ pub struct Problem<'a> {
 
 /// Solves the small symmetric system `a x = b` by Gaussian elimination with partial
 /// pivoting; `None` when singular.
-fn solve_small(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+pub(crate) fn solve_small(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
     let n = b.len();
     for col in 0..n {
         let piv = (col..n).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
