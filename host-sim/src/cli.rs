@@ -180,6 +180,10 @@ pub enum Command {
         /// of slow sinusoids; valve: other hold times and a drifting supply).
         #[arg(long, value_enum, default_value_t = crate::gap::bench::Excitation::Steps)]
         excitation: crate::gap::bench::Excitation,
+        /// Per dataset, draw the plant's physical parameters within a factor
+        /// exp(+-SPREAD) of the defaults (truth and the meta file's [model] alike).
+        #[arg(long, default_value_t = 0.0)]
+        model_spread: f64,
         /// Diagnose the labelled datasets in this folder instead of generating.
         #[arg(long)]
         datasets: Option<PathBuf>,
@@ -506,6 +510,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             only,
             extra_sets,
             excitation,
+            model_spread,
             datasets,
             write_datasets,
             out,
@@ -518,6 +523,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 only,
                 extra_sets,
                 excitation,
+                model_spread,
             };
             let started = Instant::now();
             let (_, text) = crate::gap::bench::run_bench(

@@ -172,6 +172,17 @@ pub struct BenchOptions {
     pub extra_sets: usize,
     /// Input profile of the generated records.
     pub excitation: Excitation,
+    /// Per dataset, the plant's physical parameters (`BenchPlant::spread_params`) are
+    /// drawn log-uniformly within a factor `exp(+-model_spread)` of the defaults, for the
+    /// truth and the meta file's `[model]` alike (0: every dataset uses the defaults).
+    pub model_spread: f64,
+}
+
+/// What a bench plant varies from the bench's defaults.
+#[derive(Clone, Copy, Debug, Default)]
+struct Variation {
+    excitation: Excitation,
+    model_spread: f64,
 }
 
 /// How the bench excites its truth plants. The diagnoser was developed on `Steps`; `Smooth`
@@ -228,6 +239,7 @@ impl Default for BenchOptions {
             only: Vec::new(),
             extra_sets: 12,
             excitation: Excitation::Steps,
+            model_spread: 0.0,
         }
     }
 }
@@ -258,16 +270,51 @@ trait BenchPlant: Sync {
     fn model_params(&self) -> Vec<(&'static str, f64)> {
         Vec::new()
     }
+    /// Physical parameters `--model-spread` draws per dataset (none that an effect sets).
+    fn spread_params(&self) -> Vec<&'static str> {
+        Vec::new()
+    }
+    fn variation(&self) -> Variation;
+    /// The user's model of the dataset drawn with `seed`: [`BenchPlant::model_params`],
+    /// then the spread parameters drawn around the plant's defaults.
+    fn model(&self, seed: u64) -> Vec<(&'static str, f64)> {
+        let mut model = self.model_params();
+        let spread = self.variation().model_spread;
+        if spread > 0.0 {
+            let defaults = crate::gap::plant::builtin_plant(self.plant())
+                .map(|p| p.default_params())
+                .unwrap_or_default();
+            let mut rng = stream_rng(seed, 31);
+            for name in self.spread_params() {
+                let factor = (spread * (2.0 * uniform(&mut rng) - 1.0)).exp();
+                if let Some(v) = defaults.get(name) {
+                    model.push((name, v * factor));
+                }
+            }
+        }
+        model
+    }
 }
 
 struct WheelBench {
-    excitation: Excitation,
+    vary: Variation,
 }
 
 /// Truth sub-steps per 20 Hz sample.
 const WHEEL_SUBSTEPS: usize = 20;
 
 impl BenchPlant for WheelBench {
+    fn variation(&self) -> Variation {
+        self.vary
+    }
+    fn spread_params(&self) -> Vec<&'static str> {
+        vec![
+            "inertia",
+            "viscous_coefficient",
+            "torque_constant",
+            "drive_gain",
+        ]
+    }
     fn plant(&self) -> &'static str {
         "reaction_wheel"
     }
@@ -306,7 +353,7 @@ impl BenchPlant for WheelBench {
         let n = 6000usize;
         let mut rng = stream_rng(seed, 11);
         let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
-        let command: Vec<f64> = match self.excitation {
+        let command: Vec<f64> = match self.vary.excitation {
             Excitation::Steps => {
                 let hold = (25.0 / dt) as usize;
                 let levels: Vec<f64> = (0..n.div_ceil(hold))
@@ -335,6 +382,19 @@ impl BenchPlant for WheelBench {
         let mut wheel = TruthWheel::new();
         wheel.effects = WheelEffects::none();
         wheel.noise_phase = noise_phase;
+        for (name, v) in self.model(seed) {
+            let p = &mut wheel.params;
+            match name {
+                "inertia" => p.inertia = v,
+                "torque_constant" => p.torque_constant = v,
+                "drive_gain" => p.drive_gain = v,
+                // c_v at the model's reference temperature, the slope kept.
+                "viscous_coefficient" => {
+                    p.viscous_base = v + p.viscous_slope * (23.0 + 30.0);
+                }
+                _ => {}
+            }
+        }
         let frozen_viscous = wheel.params.viscous_coefficient(23.0);
         let (mut defect, mut load_step) = (0.0, 0.0);
         for &(name, m) in effects {
@@ -411,10 +471,22 @@ impl BenchPlant for WheelBench {
 }
 
 struct MotorBench {
-    excitation: Excitation,
+    vary: Variation,
 }
 
 impl BenchPlant for MotorBench {
+    fn variation(&self) -> Variation {
+        self.vary
+    }
+    fn spread_params(&self) -> Vec<&'static str> {
+        vec![
+            "resistance",
+            "inductance",
+            "motor_constant",
+            "inertia",
+            "viscous_friction",
+        ]
+    }
     fn plant(&self) -> &'static str {
         "dc_motor"
     }
@@ -448,7 +520,7 @@ impl BenchPlant for MotorBench {
             ..Default::default()
         };
         data.t = (0..n).map(|k| k as f64 * dt).collect();
-        let (voltage, load): (Vec<f64>, Vec<f64>) = match self.excitation {
+        let (voltage, load): (Vec<f64>, Vec<f64>) = match self.vary.excitation {
             Excitation::Steps => {
                 let hold = (1.0 / dt) as usize;
                 let levels: Vec<f64> = (0..n.div_ceil(hold))
@@ -470,6 +542,9 @@ impl BenchPlant for MotorBench {
         data.inputs.insert("voltage".into(), voltage);
         data.inputs.insert("load_torque".into(), load);
         let mut params = DcMotorPlant.default_params();
+        for (name, v) in self.model(seed) {
+            params.insert(name.to_string(), v);
+        }
         let mut active = Vec::new();
         let (mut ripple, mut step) = (0.0, 0.0);
         for &(name, m) in effects {
@@ -496,10 +571,13 @@ impl BenchPlant for MotorBench {
 }
 
 struct ValveBench {
-    excitation: Excitation,
+    vary: Variation,
 }
 
 impl BenchPlant for ValveBench {
+    fn variation(&self) -> Variation {
+        self.vary
+    }
     fn plant(&self) -> &'static str {
         "valve"
     }
@@ -551,7 +629,7 @@ impl BenchPlant for ValveBench {
         let mut open = vec![false; n];
         let mut k = (2.0 / dt) as usize;
         let mut state = true;
-        let (hold_min, hold_span) = match self.excitation {
+        let (hold_min, hold_span) = match self.vary.excitation {
             Excitation::Steps => (3.0, 3.0),
             Excitation::Smooth => (1.5, 7.5),
         };
@@ -570,7 +648,7 @@ impl BenchPlant for ValveBench {
             ..Default::default()
         };
         data.t = (0..n).map(|k| k as f64 * dt).collect();
-        let supply = match self.excitation {
+        let supply = match self.vary.excitation {
             Excitation::Steps => vec![pl; n],
             // The supply sags and recovers by up to 15 % over the record.
             Excitation::Smooth => {
@@ -588,7 +666,7 @@ impl BenchPlant for ValveBench {
             open.iter().map(|o| if *o { 1.0 } else { 0.0 }).collect(),
         );
         let mut params = ValveGapPlant.default_params();
-        for (name, v) in self.model_params() {
+        for (name, v) in self.model(seed) {
             params.insert(name.to_string(), v);
         }
         let mut active = Vec::new();
@@ -628,10 +706,22 @@ impl BenchPlant for ValveBench {
 }
 
 struct ScooterBench {
-    excitation: Excitation,
+    vary: Variation,
 }
 
 impl BenchPlant for ScooterBench {
+    fn variation(&self) -> Variation {
+        self.vary
+    }
+    fn spread_params(&self) -> Vec<&'static str> {
+        vec![
+            "drive_gain",
+            "mass",
+            "motor_inertia",
+            "rear_viscous",
+            "front_viscous",
+        ]
+    }
     fn plant(&self) -> &'static str {
         "scooter"
     }
@@ -672,7 +762,7 @@ impl BenchPlant for ScooterBench {
             ..Default::default()
         };
         data.t = (0..n).map(|k| k as f64 * dt).collect();
-        let voltage = match self.excitation {
+        let voltage = match self.vary.excitation {
             Excitation::Steps => {
                 let mut voltage = Vec::with_capacity(n);
                 while voltage.len() < n {
@@ -687,6 +777,9 @@ impl BenchPlant for ScooterBench {
         };
         data.inputs.insert("voltage".into(), voltage);
         let mut params = ScooterGapPlant.default_params();
+        for (name, v) in self.model(seed) {
+            params.insert(name.to_string(), v);
+        }
         let (mut grade, mut ripple) = (0.0, 0.0);
         for &(name, m) in effects {
             let param = match name {
@@ -840,13 +933,13 @@ fn to_csv(bp: &dyn BenchPlant, clean: &Clean, measured: &[Vec<f64>]) -> String {
     String::from_utf8(buf).unwrap_or_default()
 }
 
-fn meta_text(bp: &dyn BenchPlant) -> String {
+fn meta_text(bp: &dyn BenchPlant, seed: u64) -> String {
     let mut text = format!(
         "plant = \"{}\"\ndt = {}\ndescription = \"gap-bench dataset\"\n",
         bp.plant(),
         bp.dt()
     );
-    let model = bp.model_params();
+    let model = bp.model(seed);
     if !model.is_empty() {
         text.push_str("[model]\n");
         for (name, v) in model {
@@ -867,7 +960,7 @@ fn spec_enr(bp: &dyn BenchPlant, seed: u64, base: &Clean, spec: &Spec) -> (f64, 
         (base.clone(), base.outputs.clone())
     } else {
         let clean = bp.clean(seed, &effects);
-        let reference = visible_reference(bp, &clean).unwrap_or_else(|| base.outputs.clone());
+        let reference = visible_reference(bp, seed, &clean).unwrap_or_else(|| base.outputs.clone());
         (clean, reference)
     };
     let mut out = clean.outputs.clone();
@@ -903,7 +996,7 @@ fn spec_enr(bp: &dyn BenchPlant, seed: u64, base: &Clean, spec: &Spec) -> (f64, 
 /// from another state (a truth that settles under a speed limiter starts slower), and
 /// whatever a free initial state absorbs (an effect that acts only in the first seconds of
 /// a slow wheel) is no gap the diagnoser can see either.
-fn visible_reference(bp: &dyn BenchPlant, clean: &Clean) -> Option<Vec<Vec<f64>>> {
+fn visible_reference(bp: &dyn BenchPlant, seed: u64, clean: &Clean) -> Option<Vec<Vec<f64>>> {
     let plant = crate::gap::plant::builtin_plant(bp.plant())?;
     let mut data = PlantData {
         t: clean.t.clone(),
@@ -921,7 +1014,7 @@ fn visible_reference(bp: &dyn BenchPlant, clean: &Clean) -> Option<Vec<Vec<f64>>
         .map(|(n, y)| (n.to_string(), y.clone()))
         .collect();
     let mut params = plant.default_params();
-    for (name, v) in bp.model_params() {
+    for (name, v) in bp.model(seed) {
         params.insert(name.to_string(), v);
     }
     let active = plant.model_effects(&params);
@@ -1069,24 +1162,28 @@ fn dataset(bp: &dyn BenchPlant, name: String, seed: u64, spec: &Spec, label: Lab
     Dataset {
         name,
         csv: to_csv(bp, &clean, &measured),
-        meta: meta_text(bp),
+        meta: meta_text(bp, seed),
         label,
     }
 }
 
-fn bench_plant(name: &str, excitation: Excitation) -> Option<Box<dyn BenchPlant>> {
+fn bench_plant(name: &str, vary: Variation) -> Option<Box<dyn BenchPlant>> {
     match name {
-        "reaction_wheel" => Some(Box::new(WheelBench { excitation })),
-        "dc_motor" => Some(Box::new(MotorBench { excitation })),
-        "valve" => Some(Box::new(ValveBench { excitation })),
-        "scooter" => Some(Box::new(ScooterBench { excitation })),
+        "reaction_wheel" => Some(Box::new(WheelBench { vary })),
+        "dc_motor" => Some(Box::new(MotorBench { vary })),
+        "valve" => Some(Box::new(ValveBench { vary })),
+        "scooter" => Some(Box::new(ScooterBench { vary })),
         _ => None,
     }
 }
 
 /// Generates the datasets of one plant.
 pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimError> {
-    let bp = bench_plant(plant, opts.excitation)
+    let vary = Variation {
+        excitation: opts.excitation,
+        model_spread: opts.model_spread,
+    };
+    let bp = bench_plant(plant, vary)
         .ok_or_else(|| SimError::Run(format!("gap-bench has no generator for plant `{plant}`")))?;
     let bp = bp.as_ref();
     let n_out = bp.outputs().len();
@@ -1640,4 +1737,75 @@ pub fn run_bench(
         write_text(&o.join("summary.txt"), &text)?;
     }
     Ok((outcomes, text))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Per plant, a catalogue effect whose smallest bench magnitude leaves the truth as
+    /// good as nominal.
+    const VANISHING: [(&str, &str, f64); 4] = [
+        ("reaction_wheel", "coulomb_friction", 1e-9),
+        ("dc_motor", "coulomb_friction", 1e-7),
+        ("valve", "internal_leak", 1e-12),
+        ("scooter", "motor_resistance_drift", 0.0),
+    ];
+
+    #[test]
+    fn a_vanishing_plant_effect_has_a_vanishing_ratio_for_every_input_and_model() {
+        // The ratio is measured against the user's model replayed from the clean run's
+        // start: whatever the inputs and the drawn parameters, that replay is the truth
+        // without the effect. (A window-fitted start put a smooth wheel record at 31.)
+        for excitation in [Excitation::Steps, Excitation::Smooth] {
+            for model_spread in [0.0, 0.4] {
+                let vary = Variation {
+                    excitation,
+                    model_spread,
+                };
+                for (plant, effect, magnitude) in VANISHING {
+                    let bp = bench_plant(plant, vary).unwrap();
+                    let base = bp.clean(5, &[]);
+                    let spec = Spec {
+                        plant_effects: vec![(effect.to_string(), magnitude)],
+                        generic: Vec::new(),
+                    };
+                    let (enr, _) = spec_enr(bp.as_ref(), 5, &base, &spec);
+                    // Not 0: the motor and scooter truths take 4x finer steps than the model.
+                    assert!(
+                        enr < 0.1,
+                        "{plant} {excitation:?} spread {model_spread}: {enr}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn model_spread_draws_each_dataset_its_own_plant_and_writes_it_to_the_meta_file() {
+        let vary = Variation {
+            excitation: Excitation::Steps,
+            model_spread: 0.4,
+        };
+        let bp = bench_plant("dc_motor", vary).unwrap();
+        let (a, b) = (bp.model(1), bp.model(2));
+        assert_eq!(a.len(), 5);
+        assert_ne!(a, b);
+        let defaults = DcMotorPlant.default_params();
+        for (name, v) in &a {
+            let ratio = v / defaults[*name];
+            assert!(
+                ((-0.4f64).exp()..=0.4f64.exp()).contains(&ratio),
+                "{name}: {ratio}"
+            );
+        }
+        let meta = meta_text(bp.as_ref(), 1);
+        assert!(meta.contains("[model]\nresistance = "), "{meta}");
+        assert_eq!(
+            bench_plant("dc_motor", Variation::default())
+                .unwrap()
+                .model(1),
+            []
+        );
+    }
 }
