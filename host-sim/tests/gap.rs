@@ -434,3 +434,20 @@ fn gap_finds_both_external_leaks_in_progpy_default_state_trace() {
     }
     assert!(pair["shrink"].as_f64().unwrap() > 0.99, "{pair:#}");
 }
+
+#[test]
+fn a_sensor_verdict_is_located_on_its_sensor() {
+    // The gap is located where the explaining effect changes the model most: the residual's
+    // own NIS also carries each channel's noise-estimate error, and the valve's four
+    // channels are close. This quantised y:pt (the bench's --seed 7 folder) was located on
+    // y:q by the residual.
+    let sets = generated("valve", &[], &[2.0, 4.0], 7, 0);
+    let d = sets
+        .iter()
+        .find(|d| d.name == "valve-quantisation-r4-s0")
+        .unwrap();
+    assert_eq!(d.label.channel.as_deref(), Some("y:pt"));
+    let o = run_one(d).unwrap();
+    assert_eq!(o.verdict, "quantisation:pt", "{o:#?}");
+    assert_eq!(o.channel, "y:pt", "{o:#?}");
+}

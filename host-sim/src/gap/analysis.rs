@@ -92,6 +92,63 @@ pub struct WhereReport {
     /// Periodogram of the located channel's standardised residual: (Hz, power).
     #[serde(skip)]
     pub spectrum: Vec<(f64, f64)>,
+    /// What each channel's tests found (to locate the gap on another channel).
+    #[serde(skip)]
+    per_channel: Vec<ChannelFindings>,
+}
+
+impl WhereReport {
+    /// Moves the location to `channel` (`y:<name>`), with that channel's regime, window,
+    /// band, statistic and spectrum; no change for a channel without findings.
+    pub fn relocate(&mut self, channel: &str) {
+        let Some(f) = self.per_channel.iter().find(|f| f.channel == channel) else {
+            return;
+        };
+        self.location = locate(
+            f,
+            &self.tests,
+            self.location.significant,
+            self.location.strongest_test.clone(),
+        );
+        self.spectrum = f.spectrum.clone();
+    }
+}
+
+/// The location on the channel of `f`.
+fn locate(
+    f: &ChannelFindings,
+    tests: &[TestResult],
+    significant: bool,
+    strongest_test: Option<TestResult>,
+) -> Location {
+    let regime = f
+        .regime_excess
+        .iter()
+        .filter(|(label, _, _)| {
+            tests
+                .iter()
+                .any(|t| t.channel == f.channel && t.scope == *label && t.p_adjusted < ALPHA)
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or("all".to_string(), |r| r.0.clone());
+    Location {
+        channel: f.channel.clone(),
+        regime,
+        window: f
+            .windows
+            .iter()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or([0.0, 0.0], |w| w.0),
+        band_hz: f
+            .bands
+            .iter()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or([0.0, 0.0], |b| b.0),
+        statistic: f.overall,
+        p_value: tests[f.overall_index].p_adjusted,
+        significant,
+        strongest_test,
+    }
 }
 
 fn quartile_regimes(name: &str, x: &[f64]) -> Vec<Regime> {
@@ -306,36 +363,7 @@ pub fn analyse(problem: &Problem) -> WhereReport {
         .iter()
         .max_by(|a, b| a.overall.total_cmp(&b.overall));
     let location = match best {
-        Some(f) => {
-            let regime = f
-                .regime_excess
-                .iter()
-                .filter(|(label, _, _)| {
-                    tests.iter().any(|t| {
-                        t.channel == f.channel && t.scope == *label && t.p_adjusted < ALPHA
-                    })
-                })
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .map_or("all".to_string(), |r| r.0.clone());
-            Location {
-                channel: f.channel.clone(),
-                regime,
-                window: f
-                    .windows
-                    .iter()
-                    .max_by(|a, b| a.1.total_cmp(&b.1))
-                    .map_or([0.0, 0.0], |w| w.0),
-                band_hz: f
-                    .bands
-                    .iter()
-                    .max_by(|a, b| a.1.total_cmp(&b.1))
-                    .map_or([0.0, 0.0], |b| b.0),
-                statistic: f.overall,
-                p_value: tests[f.overall_index].p_adjusted,
-                significant,
-                strongest_test,
-            }
-        }
+        Some(f) => locate(f, &tests, significant, strongest_test),
         None => Location {
             channel: String::new(),
             regime: "all".into(),
@@ -353,9 +381,11 @@ pub fn analyse(problem: &Problem) -> WhereReport {
         tests,
         cells,
         spectrum,
+        per_channel,
     }
 }
 
+#[derive(Clone, Debug)]
 struct ChannelFindings {
     channel: String,
     overall: f64,

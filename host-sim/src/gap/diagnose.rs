@@ -384,13 +384,17 @@ pub fn diagnose_with(
         }
     }
     let mut report = report;
-    if !report.location.significant {
+    let chosen = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
+    if let Some(channel) = chosen.and_then(|e| signature_channel(&problem, e)) {
+        // The gap lies where the explaining effect changes the model most, in noise units
+        // (the residual's own NIS also carries each channel's noise-estimate error).
+        report.relocate(&format!("y:{}", problem.outputs[channel]));
+    } else if !report.location.significant {
         // No test located the gap; a sensor effect in the verdict names its channel.
         if let Some(channel) = verdict_channel(&verdict, &problem.outputs) {
             report.location.channel = format!("y:{channel}");
         }
     }
-    let chosen = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
     let confusable = chosen.map_or_else(Vec::new, |v| confusable_with(v, &ranking, &pairs));
     let overlays = overlays(&problem, &report, chosen);
     Ok(Diagnosis {
@@ -491,6 +495,30 @@ fn confusable_with(
 }
 
 /// The channel of a single generic verdict (`kind:channel`), if it is one of `outputs`.
+/// The channel on which `effect`'s fitted correction to the model is largest relative to
+/// the channel's noise (RMS over the record).
+fn signature_channel(problem: &Problem, effect: &Evaluation) -> Option<usize> {
+    let corrected = problem.predict(&effect.fitted).ok()?;
+    corrected
+        .outputs
+        .iter()
+        .zip(&problem.nominal.outputs)
+        .zip(&problem.sigma)
+        .map(|((a, b), s)| {
+            let (sum, n) = a
+                .iter()
+                .zip(b)
+                .map(|(x, y)| (x - y) / s)
+                .filter(|d| d.is_finite())
+                .fold((0.0, 0usize), |(sum, n), d| (sum + d * d, n + 1));
+            (sum / n.max(1) as f64).sqrt()
+        })
+        .enumerate()
+        .filter(|(_, r)| *r > 0.0)
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(c, _)| c)
+}
+
 fn verdict_channel<'a>(verdict: &str, outputs: &'a [String]) -> Option<&'a str> {
     let (_, channel) = verdict.split_once(':')?;
     if verdict.contains('+') {

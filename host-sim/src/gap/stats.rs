@@ -158,11 +158,15 @@ pub fn second_differences(y: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// Sensor-noise std estimated from the data alone: the MAD of second differences
-/// (`var(y[k+1] - 2 y[k] + y[k-1]) = 6 sigma^2` for white noise; the signal's own
-/// curvature is negligible at the sample rate, and the median ignores transients). Falls
-/// back to the plain std of the differences when more than half are zero (quantised data).
-/// Returns the estimate and its effective degrees of freedom (the MAD's efficiency is 37 %).
+/// Sensor-noise std estimated from the data alone, from second differences
+/// (`var(y[k+1] - 2 y[k] + y[k-1]) = 6 sigma^2` for white noise; the signal's own curvature
+/// is negligible at the sample rate). Their MAD gives a scale that ignores transients; the
+/// variance of the differences within 3 of that scale, corrected for the truncation and
+/// iterated, then keeps that robustness at ~95 % of the plain variance's efficiency (the
+/// MAD alone has 37 %, which put the estimate 5 % off on 1800 samples). Falls back to the
+/// plain std of the differences when more than half are zero (quantised data). Returns the
+/// estimate and its effective degrees of freedom (second differences of white noise are
+/// correlated, -2/3 at lag 1 and 1/6 at lag 2: about half as many as there are).
 pub fn noise_std_from_differences(y: &[f64]) -> Option<(f64, f64)> {
     let d2 = second_differences(y);
     if d2.len() < 10 {
@@ -170,12 +174,30 @@ pub fn noise_std_from_differences(y: &[f64]) -> Option<(f64, f64)> {
     }
     let abs: Vec<f64> = d2.iter().map(|v| v.abs()).collect();
     let mad = median(&abs)?;
-    let sigma = if mad > 0.0 {
-        1.4826 * mad / 6f64.sqrt()
-    } else {
-        (d2.iter().map(|v| v * v).sum::<f64>() / d2.len() as f64 / 6.0).sqrt()
-    };
-    (sigma > 0.0).then_some((sigma, 0.37 * d2.len() as f64))
+    let n = d2.len() as f64;
+    let dof = n / (1.0 + 2.0 * (4.0 / 9.0 + 1.0 / 36.0));
+    if mad <= 0.0 {
+        let sigma = (d2.iter().map(|v| v * v).sum::<f64>() / n / 6.0).sqrt();
+        return (sigma > 0.0).then_some((sigma, dof));
+    }
+    // Variance of a unit normal truncated to [-3, 3].
+    const TRUNCATED_VARIANCE: f64 = 0.973_336_924;
+    let mut scale = 1.4826 * mad;
+    let mut kept = n;
+    for _ in 0..4 {
+        let limit = 3.0 * scale;
+        let (sum, m) = d2
+            .iter()
+            .filter(|v| v.abs() <= limit)
+            .fold((0.0, 0usize), |(a, m), v| (a + v * v, m + 1));
+        if m < 10 {
+            break;
+        }
+        scale = (sum / m as f64 / TRUNCATED_VARIANCE).sqrt();
+        kept = m as f64;
+    }
+    let sigma = scale / 6f64.sqrt();
+    (sigma > 0.0).then_some((sigma, 0.95 * dof * kept / n))
 }
 
 /// Periodogram of `x` (mean removed) normalised so that white noise of unit variance has
@@ -236,6 +258,36 @@ mod tests {
             ar[k] = 0.3 * ar[k - 1] + white[k];
         }
         assert!(ljung_box(&ar, 20).1 < 1e-10);
+    }
+
+    #[test]
+    fn noise_std_spreads_as_its_degrees_of_freedom_say_and_shrugs_off_steps() {
+        // 200 records of 1800 samples (a 90 s valve record). Pure noise: the relative spread
+        // of the estimates is the chi-square one of the stated dof (1 / sqrt(2 dof), 2.4 %;
+        // the MAD alone spreads 3.4 %). A staircase of 10-sigma steps every 50 samples (4 %
+        // of the differences hit): the mean is off by 2 % (the MAD alone: 5 %).
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(5);
+        for (step, bias) in [(0.0, 0.01), (10.0, 0.03)] {
+            let (mut sum, mut sum2, mut dof_sum) = (0.0, 0.0, 0.0);
+            let records = 200;
+            for _ in 0..records {
+                let x: Vec<f64> = (0..1800)
+                    .map(|k| standard_normal::<f64, _>(&mut rng) + step * (k / 50) as f64)
+                    .collect();
+                let (sigma, dof) = noise_std_from_differences(&x).unwrap();
+                sum += sigma;
+                sum2 += sigma * sigma;
+                dof_sum += dof;
+            }
+            let mean = sum / records as f64;
+            let spread = (sum2 / records as f64 - mean * mean).sqrt() / mean;
+            let stated = 1.0 / (2.0 * dof_sum / records as f64).sqrt();
+            assert!((mean - 1.0).abs() < bias, "step {step}: {mean}");
+            assert!(
+                spread < 1.25 * stated && spread > 0.75 * stated,
+                "{spread} vs {stated}"
+            );
+        }
     }
 
     #[test]
