@@ -494,7 +494,6 @@ fn confusable_with(
     out
 }
 
-/// The channel of a single generic verdict (`kind:channel`), if it is one of `outputs`.
 /// The channel on which `effect`'s fitted correction to the model is largest relative to
 /// the channel's noise (RMS over the record).
 fn signature_channel(problem: &Problem, effect: &Evaluation) -> Option<usize> {
@@ -519,6 +518,7 @@ fn signature_channel(problem: &Problem, effect: &Evaluation) -> Option<usize> {
         .map(|(c, _)| c)
 }
 
+/// The channel of a single generic verdict (`kind:channel`), if it is one of `outputs`.
 fn verdict_channel<'a>(verdict: &str, outputs: &'a [String]) -> Option<&'a str> {
     let (_, channel) = verdict.split_once(':')?;
     if verdict.contains('+') {
