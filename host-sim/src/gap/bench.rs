@@ -19,6 +19,7 @@ use crate::gap::diagnose::diagnose_recording;
 use crate::gap::effects::GenericKind;
 use crate::gap::meta::parse_gap_meta;
 use crate::gap::plant::{GapPlant, PlantData};
+use crate::gap::start::{refit_start, start_sensitivities};
 use crate::gap::scooter::{ScooterGapPlant, simulate_scooter};
 use crate::gap::valve::{TruthExtras as ValveTruthExtras, ValveGapPlant, simulate_valve};
 use crate::lockstep::{SimRng, standard_normal, stream_rng, uniform};
@@ -1029,52 +1030,16 @@ fn visible_reference(bp: &dyn BenchPlant, seed: u64, clean: &Clean) -> Option<Ve
             })
             .collect()
     };
-    let mut reference = replay(&data)?;
+    let raw = replay(&data)?;
     let sigma = bp.sigma();
-    let mut columns = Vec::new();
-    for (name, s) in bp.outputs().iter().zip(&sigma) {
-        let step = 10.0 * s;
-        let mut perturbed = data.clone();
-        perturbed.initial_offsets.insert(name.to_string(), step);
-        let Some(shifted) = replay(&perturbed) else {
-            continue;
-        };
-        let g: Vec<Vec<f64>> = shifted
-            .iter()
-            .zip(&reference)
-            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) / step).collect())
-            .collect();
-        let flat = || g.iter().flatten();
-        if flat().any(|v| v.abs() > 1e-6) && flat().all(|v| v.is_finite()) {
-            columns.push(g);
-        }
-    }
-    let m = columns.len();
-    let (mut a, mut b) = (vec![vec![0.0; m]; m], vec![0.0; m]);
-    for (c, y) in clean.outputs.iter().enumerate() {
-        let w = 1.0 / (sigma[c] * sigma[c]);
-        for (k, yk) in y.iter().enumerate() {
-            let r = yk - reference[c][k];
-            if !r.is_finite() {
-                continue;
-            }
-            for p in 0..m {
-                b[p] += w * columns[p][c][k] * r;
-                for q in 0..m {
-                    a[p][q] += w * columns[p][c][k] * columns[q][c][k];
-                }
-            }
-        }
-    }
-    if let Some(delta) = crate::gap::effects::solve_small(a, b) {
-        for (g, d) in columns.iter().zip(delta).filter(|(_, d)| d.is_finite()) {
-            for (out, gc) in reference.iter_mut().zip(g) {
-                for (v, gk) in out.iter_mut().zip(gc) {
-                    *v += d * gk;
-                }
-            }
-        }
-    }
+    let starts: Vec<(String, f64)> = bp
+        .outputs()
+        .iter()
+        .zip(&sigma)
+        .map(|(n, s)| (n.to_string(), *s))
+        .collect();
+    let sens = start_sensitivities(&data, &starts, &raw, replay);
+    let reference = refit_start(&raw, &sens, &clean.outputs, &sigma, |_| true, |s| s);
     Some(reference)
 }
 

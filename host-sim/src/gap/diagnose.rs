@@ -7,6 +7,7 @@ use crate::gap::analysis::{ALPHA, WhereReport, analyse};
 use crate::gap::effects::{Component, Evaluation, Problem, flat_values};
 use crate::gap::meta::{GapMeta, read_gap_meta};
 use crate::gap::plant::{BUILTIN_PLANTS, GapPlant, PlantData, Simulation, builtin_plant};
+use crate::gap::start::start_sensitivities;
 use crate::gap::stats::{noise_std_from_differences, second_differences};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -320,27 +321,19 @@ pub fn diagnose_with(
         select: select.clone(),
     };
     let nominal = select_outputs(&nominal_full, &select);
-    // How the replay depends on each measured initial value (zero for channels the plant
-    // does not initialise from the data).
-    let mut init_sensitivity = Vec::new();
-    for (c, (_, name)) in present.iter().enumerate() {
-        let step = 10.0 * sigma[c];
-        let mut perturbed = data.clone();
-        perturbed.initial_offsets.insert(name.clone(), step);
-        let Ok(sim) = wrapped.simulate(&base, &active, &perturbed) else {
-            continue;
-        };
-        let sens: Vec<Vec<f64>> = sim
-            .outputs
-            .iter()
-            .zip(&nominal.outputs)
-            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) / step).collect())
-            .collect();
-        let matters = sens.iter().flatten().any(|g| g.abs() > 1e-6);
-        if matters && sens.iter().flatten().all(|g| g.is_finite()) {
-            init_sensitivity.push((c, sens, sigma[c]));
-        }
-    }
+    // How the replay depends on each measured initial value (channels the plant does not
+    // initialise from the data are left out).
+    let starts: Vec<(String, f64)> = present
+        .iter()
+        .zip(&sigma)
+        .map(|((_, name), s)| (name.clone(), *s))
+        .collect();
+    let init_sensitivity = start_sensitivities(&data, &starts, &nominal.outputs, |moved| {
+        wrapped
+            .simulate(&base, &active, moved)
+            .ok()
+            .map(|sim| sim.outputs)
+    });
     let mut problem = Problem {
         plant: &wrapped,
         data: &data,

@@ -11,6 +11,7 @@
 //! from the training residuals) minus `k/2 ln n_train` (BIC-like).
 
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
+use crate::gap::start::{StartSensitivity, refit_start};
 use crate::gap::stats::{holm, variance_ratio_p};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
@@ -266,36 +267,8 @@ pub struct Problem<'a> {
     /// The replay of the user's model from the measured initial condition.
     pub nominal_raw: Simulation,
     /// Sensitivity of the replay to the initial value of each output channel that the
-    /// plant initialises from the data: `(channel, d outputs / d initial value, step)`.
-    pub init_sensitivity: Vec<(usize, Vec<Vec<f64>>, f64)>,
-}
-
-/// Solves the small symmetric system `a x = b` by Gaussian elimination with partial
-/// pivoting; `None` when singular.
-pub(crate) fn solve_small(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
-    let n = b.len();
-    for col in 0..n {
-        let piv = (col..n).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if a[piv][col].abs() < 1e-300 {
-            return None;
-        }
-        a.swap(col, piv);
-        b.swap(col, piv);
-        for row in col + 1..n {
-            let f = a[row][col] / a[col][col];
-            let pivot_row = a[col].clone();
-            for (v, p) in a[row].iter_mut().zip(&pivot_row).skip(col) {
-                *v -= f * p;
-            }
-            b[row] -= f * b[col];
-        }
-    }
-    let mut x = vec![0.0; n];
-    for row in (0..n).rev() {
-        let s: f64 = (row + 1..n).map(|k| a[row][k] * x[k]).sum();
-        x[row] = (b[row] - s) / a[row][row];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
+    /// plant initialises from the data.
+    pub init_sensitivity: Vec<StartSensitivity>,
 }
 
 /// A fitted and scored candidate.
@@ -431,15 +404,18 @@ impl<'a> Problem<'a> {
     }
 
     /// Applies the generic components of `fitted` to a replay.
-    fn apply_generic(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
-        let mut out = sim.clone();
+    fn apply_generic(
+        &self,
+        mut outputs: Vec<Vec<f64>>,
+        fitted: &[(Component, Vec<f64>)],
+    ) -> Vec<Vec<f64>> {
         for (c, values) in fitted {
             if let Component::Generic(kind, ch) = c {
-                let y = &mut out.outputs[*ch];
+                let y = &mut outputs[*ch];
                 *y = kind.apply(values, y, self.data.dt);
             }
         }
-        out
+        outputs
     }
 
     /// The replay from the measured initial condition, then the generic components, with
@@ -448,54 +424,17 @@ impl<'a> Problem<'a> {
     /// (bias, scale, saturation, ...), the effect itself, which a slow plant would carry
     /// through the whole record.
     fn with_refitted_start(&self, raw: Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
-        let base = self.apply_generic(&raw, fitted);
-        if self.init_sensitivity.is_empty() {
-            return base;
-        }
-        let shifted = |deltas: &[f64]| -> Simulation {
-            let mut s = raw.clone();
-            for ((_, sens, _), d) in self.init_sensitivity.iter().zip(deltas) {
-                for (out, sj) in s.outputs.iter_mut().zip(sens) {
-                    for (v, g) in out.iter_mut().zip(sj) {
-                        *v += d * g;
-                    }
-                }
-            }
-            self.apply_generic(&s, fitted)
-        };
-        let m = self.init_sensitivity.len();
-        let jac: Vec<Simulation> = (0..m)
-            .map(|i| {
-                let mut d = vec![0.0; m];
-                d[i] = self.init_sensitivity[i].2;
-                shifted(&d)
-            })
-            .collect();
-        let mut a = vec![vec![0.0; m]; m];
-        let mut b = vec![0.0; m];
-        for (j, y) in self.measured.iter().enumerate() {
-            let w = 1.0 / (self.sigma[j] * self.sigma[j]);
-            for (k, &yk) in y.iter().enumerate() {
-                if !(self.train[k] && yk.is_finite()) {
-                    continue;
-                }
-                let r = yk - base.outputs[j][k];
-                let g: Vec<f64> = (0..m)
-                    .map(|i| {
-                        (jac[i].outputs[j][k] - base.outputs[j][k]) / self.init_sensitivity[i].2
-                    })
-                    .collect();
-                for p in 0..m {
-                    b[p] += w * g[p] * r;
-                    for q in 0..m {
-                        a[p][q] += w * g[p] * g[q];
-                    }
-                }
-            }
-        }
-        match solve_small(a, b) {
-            Some(delta) if delta.iter().all(|d| d.is_finite()) => shifted(&delta),
-            _ => base,
+        let outputs = refit_start(
+            &raw.outputs,
+            &self.init_sensitivity,
+            &self.measured,
+            &self.sigma,
+            |k| self.train[k],
+            |outputs| self.apply_generic(outputs, fitted),
+        );
+        Simulation {
+            outputs,
+            states: raw.states,
         }
     }
 

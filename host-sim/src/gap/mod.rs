@@ -25,6 +25,7 @@ pub mod meta;
 pub mod plant;
 pub mod report;
 pub mod scooter;
+pub mod start;
 pub mod stats;
 pub mod valve;
 pub mod wheel;
