@@ -158,7 +158,14 @@ mod tests {
             gain: vec![t.iter().map(|t| (-t).exp()).collect()],
             step: 0.01,
         }];
-        let fitted = refit_start(&raw, &sens, &[truth.clone()], &[0.01], |_| true, |s| s);
+        let fitted = refit_start(
+            &raw,
+            &sens,
+            std::slice::from_ref(&truth),
+            &[0.01],
+            |_| true,
+            |s| s,
+        );
         for (f, y) in fitted[0].iter().zip(&truth) {
             assert!((f - y).abs() < 1e-12, "{f} vs {y}");
         }
