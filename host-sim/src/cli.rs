@@ -184,6 +184,10 @@ pub enum Command {
         /// exp(+-SPREAD) of the defaults (truth and the meta file's [model] alike).
         #[arg(long, default_value_t = 0.0)]
         model_spread: f64,
+        /// Scale every sensor's noise std by this factor (effects are placed at their
+        /// ratio to the scaled noise).
+        #[arg(long, default_value_t = 1.0)]
+        noise_scale: f64,
         /// Diagnose the labelled datasets in this folder instead of generating.
         #[arg(long)]
         datasets: Option<PathBuf>,
@@ -511,6 +515,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             extra_sets,
             excitation,
             model_spread,
+            noise_scale,
             datasets,
             write_datasets,
             out,
@@ -524,6 +529,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 extra_sets,
                 excitation,
                 model_spread,
+                noise_scale,
             };
             let started = Instant::now();
             let (_, text) = crate::gap::bench::run_bench(

@@ -177,13 +177,27 @@ pub struct BenchOptions {
     /// drawn log-uniformly within a factor `exp(+-model_spread)` of the defaults, for the
     /// truth and the meta file's `[model]` alike (0: every dataset uses the defaults).
     pub model_spread: f64,
+    /// Every sensor's noise std is the bench's default times this (effects are placed at
+    /// their ratio to the scaled noise, so they scale with it).
+    pub noise_scale: f64,
 }
 
 /// What a bench plant varies from the bench's defaults.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 struct Variation {
     excitation: Excitation,
     model_spread: f64,
+    noise_scale: f64,
+}
+
+impl Default for Variation {
+    fn default() -> Self {
+        Self {
+            excitation: Excitation::Steps,
+            model_spread: 0.0,
+            noise_scale: 1.0,
+        }
+    }
 }
 
 /// How the bench excites its truth plants. The diagnoser was developed on `Steps`; `Smooth`
@@ -241,6 +255,7 @@ impl Default for BenchOptions {
             extra_sets: 12,
             excitation: Excitation::Steps,
             model_spread: 0.0,
+            noise_scale: 1.0,
         }
     }
 }
@@ -258,7 +273,16 @@ trait BenchPlant: Sync {
     fn plant(&self) -> &'static str;
     fn dt(&self) -> f64;
     fn outputs(&self) -> Vec<&'static str>;
-    fn sigma(&self) -> Vec<f64>;
+    /// The bench's default sensor noise std per output.
+    fn default_sigma(&self) -> Vec<f64>;
+    /// The truth's sensor noise std per output.
+    fn sigma(&self) -> Vec<f64> {
+        let scale = self.variation().noise_scale;
+        self.default_sigma()
+            .into_iter()
+            .map(|s| s * scale)
+            .collect()
+    }
     /// Catalogue effects the truth can switch on, with the range searched for a magnitude.
     fn plant_effects(&self) -> Vec<(&'static str, f64, f64, bool)>;
     /// Out-of-catalogue effects, with magnitude ranges.
@@ -325,7 +349,7 @@ impl BenchPlant for WheelBench {
     fn outputs(&self) -> Vec<&'static str> {
         vec!["current", "speed"]
     }
-    fn sigma(&self) -> Vec<f64> {
+    fn default_sigma(&self) -> Vec<f64> {
         vec![
             WheelSensors::LOW_NOISE.current_std,
             WheelSensors::LOW_NOISE.speed_std,
@@ -497,7 +521,7 @@ impl BenchPlant for MotorBench {
     fn outputs(&self) -> Vec<&'static str> {
         vec!["current", "speed"]
     }
-    fn sigma(&self) -> Vec<f64> {
+    fn default_sigma(&self) -> Vec<f64> {
         vec![0.02, 0.5]
     }
     fn plant_effects(&self) -> Vec<(&'static str, f64, f64, bool)> {
@@ -588,7 +612,7 @@ impl BenchPlant for ValveBench {
     fn outputs(&self) -> Vec<&'static str> {
         vec!["x", "pt", "pb", "q"]
     }
-    fn sigma(&self) -> Vec<f64> {
+    fn default_sigma(&self) -> Vec<f64> {
         // The project's valve filter noise (data/progpy-valve/gap meta files).
         vec![1e-4, 5e3, 5e3, 5e-3]
     }
@@ -732,7 +756,7 @@ impl BenchPlant for ScooterBench {
     fn outputs(&self) -> Vec<&'static str> {
         vec!["rear_speed", "body_speed", "front_speed"]
     }
-    fn sigma(&self) -> Vec<f64> {
+    fn default_sigma(&self) -> Vec<f64> {
         let s = crate::plants::scooter::SensorNoise::default();
         vec![s.rear, s.body, s.front]
     }
@@ -1147,6 +1171,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
     let vary = Variation {
         excitation: opts.excitation,
         model_spread: opts.model_spread,
+        noise_scale: opts.noise_scale,
     };
     let bp = bench_plant(plant, vary)
         .ok_or_else(|| SimError::Run(format!("gap-bench has no generator for plant `{plant}`")))?;
@@ -1727,6 +1752,7 @@ mod tests {
                 let vary = Variation {
                     excitation,
                     model_spread,
+                    ..Variation::default()
                 };
                 for (plant, effect, magnitude) in VANISHING {
                     let bp = bench_plant(plant, vary).unwrap();
@@ -1749,8 +1775,8 @@ mod tests {
     #[test]
     fn model_spread_draws_each_dataset_its_own_plant_and_writes_it_to_the_meta_file() {
         let vary = Variation {
-            excitation: Excitation::Steps,
             model_spread: 0.4,
+            ..Variation::default()
         };
         let bp = bench_plant("dc_motor", vary).unwrap();
         let (a, b) = (bp.model(1), bp.model(2));
