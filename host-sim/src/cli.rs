@@ -151,6 +151,9 @@ pub enum Command {
         #[arg(long)]
         meta: Option<PathBuf>,
     },
+    /// Prints every built-in gap plant's inputs, outputs, `[model]` parameters and effect
+    /// catalogue, and the generic sensor effects (Markdown, as in docs/gap.md).
+    GapPlants,
     /// Proves `prognos gap` on generated data whose effect it is not told about (or on a
     /// folder of labelled datasets) and prints attribution, localisation and shrink.
     GapBench {
@@ -504,6 +507,10 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             for f in files {
                 println!("wrote {}", f.display());
             }
+            Ok(())
+        }
+        Command::GapPlants => {
+            print!("{}", crate::gap::plant_reference());
             Ok(())
         }
         Command::GapBench {

@@ -451,3 +451,20 @@ fn a_sensor_verdict_is_located_on_its_sensor() {
     assert_eq!(o.verdict, "quantisation:pt", "{o:#?}");
     assert_eq!(o.channel, "y:pt", "{o:#?}");
 }
+
+#[test]
+fn docs_gap_md_lists_every_plant_as_the_code_declares_it() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/gap.md");
+    let page = std::fs::read_to_string(&path).unwrap();
+    let printed = prognos(&["gap-plants"]);
+    assert!(printed.status.success());
+    let reference = String::from_utf8(printed.stdout).unwrap();
+    assert_eq!(reference, prognos_sim::gap::plant_reference());
+    assert!(
+        page.ends_with(&reference),
+        "docs/gap.md is out of date: regenerate its reference part with `prognos gap-plants`"
+    );
+    for plant in ["reaction_wheel", "valve", "scooter", "dc_motor"] {
+        assert!(reference.contains(&format!("### `{plant}`")), "{plant}");
+    }
+}

@@ -178,6 +178,13 @@ impl GapPlant for DcMotorPlant {
         vec!["voltage"]
     }
 
+    fn optional_inputs(&self) -> Vec<(&'static str, &'static str)> {
+        vec![(
+            "load_torque",
+            "N m, a known load on the shaft (0 without it)",
+        )]
+    }
+
     fn outputs(&self) -> Vec<&'static str> {
         vec!["current", "speed"]
     }

@@ -543,6 +543,9 @@ impl GapPlant for SelectPlant<'_> {
     fn required_inputs(&self) -> Vec<&'static str> {
         self.inner.required_inputs()
     }
+    fn optional_inputs(&self) -> Vec<(&'static str, &'static str)> {
+        self.inner.optional_inputs()
+    }
     fn outputs(&self) -> Vec<&'static str> {
         let all = self.inner.outputs();
         self.select.iter().map(|&i| all[i]).collect()

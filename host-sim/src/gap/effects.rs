@@ -76,6 +76,43 @@ impl GenericKind {
         Self::ALL.iter().copied().find(|k| k.name() == name)
     }
 
+    /// What the effect does to a measured channel.
+    pub fn doc(self) -> &'static str {
+        match self {
+            GenericKind::SensorBias => "`y = y_model + bias`",
+            GenericKind::SensorScale => "`y = (1 + scale_error) y_model`",
+            GenericKind::Quantisation => {
+                "`y = step round((y_model + e) / step)`, sensor noise `e` (std `noise_std`) \
+                 before the quantiser"
+            }
+            GenericKind::MeasurementDelay => "`y(t) = y_model(t - delay_s)`",
+            GenericKind::OutputSaturation => "`y = clamp(y_model, -limit, limit)`",
+            GenericKind::DeadZone => "`y = sign(y_model) max(abs(y_model) - width, 0)`",
+            GenericKind::FirstOrderLag => "first-order sensor lag, time constant `tau_s`",
+        }
+    }
+
+    /// The generic catalogue as a Markdown table.
+    pub fn describe_all() -> String {
+        let mut s = String::from(
+            "Candidates on every measured channel `y:<c>` of every plant, named `<effect>:<c>` \
+             in verdicts (they are not catalogue effects, so not for `sim_effects`):\n\n| effect | parameters | model |\n|---|---|---|\n",
+        );
+        for k in Self::ALL {
+            s.push_str(&format!(
+                "| `{}` | {} | {} |\n",
+                k.name(),
+                k.param_names()
+                    .iter()
+                    .map(|p| format!("`{p}`"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                k.doc()
+            ));
+        }
+        s
+    }
+
     /// Parameter names in the ranking.
     pub fn param_names(self) -> &'static [&'static str] {
         match self {
@@ -802,7 +839,9 @@ impl<'a> Problem<'a> {
         for _ in 0..passes {
             for i in 0..dims.len() {
                 let (value, cost) = self.line_search(components, &dims, &theta, i, grid, golden);
-                if cost < best {
+                // A tie moves too: on a plateau the line search keeps the value that
+                // changes the model least, which the start need not be.
+                if cost <= best {
                     best = cost;
                     theta[i] = value;
                 }
@@ -924,8 +963,39 @@ impl<'a> Problem<'a> {
             probe[i] = to_value(d, u);
             self.cost_at(components, dims, &probe)
         };
-        let (u, c) = grid_then_golden(&mut eval, 0.0, 1.0, grid, golden, true);
+        let mut probe = theta.to_vec();
+        let mut change = |u: f64| {
+            probe[i] = to_value(d, u);
+            self.change_from_nominal(components, dims, &probe)
+        };
+        let (u, c) = grid_then_golden(&mut eval, 0.0, 1.0, grid, golden, Some(&mut change));
         (to_value(d, u), c)
+    }
+
+    /// How far the model with `theta` departs from the user's model over the whole record
+    /// (inputs are known everywhere), in squared noise units: among values the training
+    /// data cannot tell apart, the fit keeps the one that changes the model least, so a
+    /// threshold the training blocks never reach is not guessed just above their range.
+    fn change_from_nominal(&self, components: &[Component], dims: &[Dim], theta: &[f64]) -> f64 {
+        let fitted = assemble(components, dims, theta);
+        let Ok(sim) = self.predict(&fitted) else {
+            return f64::INFINITY;
+        };
+        let mut sum = 0.0;
+        for ((a, b), s) in sim
+            .outputs
+            .iter()
+            .zip(&self.nominal.outputs)
+            .zip(&self.sigma)
+        {
+            for (x, y) in a.iter().zip(b) {
+                let d = (x - y) / s;
+                if d.is_finite() {
+                    sum += d * d;
+                }
+            }
+        }
+        sum
     }
 }
 
@@ -933,15 +1003,16 @@ impl<'a> Problem<'a> {
 /// steps in the bracket around the best grid point. When the best cost is shared by
 /// several grid points (a plateau: a range of the parameter that changes nothing, such as
 /// a critical ratio below every ratio the orifices see), the minimum can hide between the
-/// plateau's edge and the next grid point; with `edges` those brackets are searched the
-/// same way. Returns the best point and its cost.
+/// plateau's edge and the next grid point: with `prefer` given, those brackets are
+/// searched the same way, and else the plateau's end that `prefer` ranks lower is kept.
+/// Returns the best point and its cost.
 fn grid_then_golden(
     eval: &mut dyn FnMut(f64) -> f64,
     lo: f64,
     hi: f64,
     grid: usize,
     golden: usize,
-    edges: bool,
+    prefer: Option<&mut dyn FnMut(f64) -> f64>,
 ) -> (f64, f64) {
     let grid = grid.max(2);
     let step = (hi - lo) / (grid - 1) as f64;
@@ -962,13 +1033,21 @@ fn grid_then_golden(
         p1 += 1;
     }
     let mut best = (at(g_best), c_best);
-    if edges && p1 > p0 && c_best.is_finite() {
+    if let Some(prefer) = prefer
+        && p1 > p0
+        && c_best.is_finite()
+    {
+        if prefer(at(p1)) < prefer(at(p0)) {
+            best.0 = at(p1);
+        } else {
+            best.0 = at(p0);
+        }
         let brackets = [
             (p1 + 1 < grid).then(|| (at(p1), at(p1 + 1))),
             (p0 > 0).then(|| (at(p0 - 1), at(p0))),
         ];
         for (a, b) in brackets.into_iter().flatten() {
-            let found = grid_then_golden(eval, a, b, golden.max(3), golden, false);
+            let found = grid_then_golden(eval, a, b, golden.max(3), golden, None);
             if found.1 < best.1 {
                 best = found;
             }
@@ -1197,13 +1276,25 @@ mod tests {
                 100.0 - 50.0 * (-((u - 0.43) / 0.004).powi(2)).exp() + 400.0 * (u - 0.42)
             }
         };
-        let (u, c) = grid_then_golden(&mut f, 0.0, 1.0, 13, 16, true);
+        let (u, c) = grid_then_golden(&mut f, 0.0, 1.0, 13, 16, Some(&mut |_| 0.0));
         assert!((u - 0.43).abs() < 2e-3 && c < 60.0, "{u} {c}");
-        let (u, c) = grid_then_golden(&mut f, 0.0, 1.0, 13, 16, false);
+        let (u, c) = grid_then_golden(&mut f, 0.0, 1.0, 13, 16, None);
         assert!(
             c >= 100.0 - 1e-9,
             "without the edge search the valley is missed: {u} {c}"
         );
+    }
+
+    #[test]
+    fn on_a_plateau_the_line_search_keeps_the_end_that_changes_the_model_least() {
+        // A threshold the training data never reach: every value above 0.3 fits alike.
+        // The model changes less the higher the threshold (it bites later off-training).
+        let mut cost = |u: f64| if u < 0.3 { 10.0 + (0.3 - u) } else { 10.0 };
+        let (u, c) = grid_then_golden(&mut cost, 0.0, 1.0, 13, 16, Some(&mut |u| 1.0 - u));
+        assert_eq!((u, c), (1.0, 10.0));
+        // Change growing with the value: the plateau's lower end.
+        let (u, _) = grid_then_golden(&mut cost, 0.0, 1.0, 13, 16, Some(&mut |u| u));
+        assert!((u - 4.0 / 12.0).abs() < 1e-12, "{u}");
     }
 
     #[test]

@@ -31,4 +31,19 @@ pub mod valve;
 pub mod wheel;
 
 pub use diagnose::{Diagnosis, diagnose_files, diagnose_recording};
+
+/// The reference of every built-in plant and of the generic catalogue (Markdown; printed
+/// by `prognos gap-plants` and kept in `docs/gap.md`).
+pub fn plant_reference() -> String {
+    let mut s = String::from("## Built-in plants\n\n");
+    for name in plant::BUILTIN_PLANTS {
+        if let Some(p) = builtin_plant(name) {
+            s.push_str(&plant::describe(p.as_ref()));
+            s.push('\n');
+        }
+    }
+    s.push_str("## Generic sensor effects\n\n");
+    s.push_str(&effects::GenericKind::describe_all());
+    s
+}
 pub use plant::{GapPlant, builtin_plant};

@@ -297,6 +297,10 @@ pub trait GapPlant: Sync {
     fn parameters(&self) -> Vec<ParamSpec>;
     /// Input channels the replay needs (`u:<name>`).
     fn required_inputs(&self) -> Vec<&'static str>;
+    /// Input channels the replay uses when present, with what for.
+    fn optional_inputs(&self) -> Vec<(&'static str, &'static str)> {
+        Vec::new()
+    }
     /// Measured channels the model predicts (`y:<name>`), in simulation order.
     fn outputs(&self) -> Vec<&'static str>;
     /// The plant's own catalogue of candidate effects.
@@ -333,6 +337,66 @@ pub trait GapPlant: Sync {
             .map(|p| (p.name.to_string(), p.default))
             .collect()
     }
+}
+
+/// A plant's interface as the meta file and the CSV see it, as Markdown: inputs,
+/// outputs, `[model]` parameters with defaults, and its catalogue.
+pub fn describe(plant: &dyn GapPlant) -> String {
+    let list = |v: Vec<String>| v.join(", ");
+    let mut s = format!("### `{}`\n\n", plant.name());
+    let optional: Vec<String> = plant
+        .optional_inputs()
+        .iter()
+        .map(|(u, why)| format!("`u:{u}` ({why})"))
+        .collect();
+    s.push_str(&format!(
+        "- required inputs: {}\n- optional inputs: {}\n- outputs: {}\n\n",
+        list(
+            plant
+                .required_inputs()
+                .iter()
+                .map(|u| format!("`u:{u}`"))
+                .collect()
+        ),
+        if optional.is_empty() {
+            "none".to_string()
+        } else {
+            list(optional)
+        },
+        list(plant.outputs().iter().map(|y| format!("`y:{y}`")).collect())
+    ));
+    s.push_str("| `[model]` parameter | default | meaning |\n|---|---|---|\n");
+    for p in plant.parameters() {
+        s.push_str(&format!("| `{}` | {:?} | {} |\n", p.name, p.default, p.doc));
+    }
+    s.push_str("\n| effect | fitted parameters | needs inputs | model |\n|---|---|---|---|\n");
+    for e in plant.effects() {
+        let fitted = e
+            .fit
+            .iter()
+            .map(|r| {
+                let side = match r.side {
+                    Side::Either => "",
+                    Side::BelowModel => ", below the model value",
+                    Side::AboveModel => ", above the model value",
+                };
+                format!("`{}` in [{:?}, {:?}]{side}", r.name, r.lo, r.hi)
+            })
+            .collect();
+        let needs: Vec<String> = e.needs_inputs.iter().map(|u| format!("`u:{u}`")).collect();
+        s.push_str(&format!(
+            "| `{}` | {} | {} | {} |\n",
+            e.name,
+            list(fitted),
+            if needs.is_empty() {
+                "-".to_string()
+            } else {
+                list(needs)
+            },
+            e.doc
+        ));
+    }
+    s
 }
 
 /// The built-in plant called `name`.

@@ -358,6 +358,17 @@ impl GapPlant for WheelGapPlant {
         vec!["command"]
     }
 
+    fn optional_inputs(&self) -> Vec<(&'static str, &'static str)> {
+        vec![
+            ("temperature", "degC; viscous_temperature"),
+            (
+                "angle",
+                "rad, the commutation angle; without it ripple and cogging integrate the \
+                 replayed speed and lose their phase over long records",
+            ),
+        ]
+    }
+
     fn outputs(&self) -> Vec<&'static str> {
         vec!["current", "speed"]
     }
