@@ -185,12 +185,15 @@ pub enum Command {
         excitation: crate::gap::bench::Excitation,
         /// Per dataset, draw the plant's physical parameters within a factor
         /// exp(+-SPREAD) of the defaults (truth and the meta file's [model] alike).
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, default_value_t = 0.0, value_parser = non_negative_number)]
         model_spread: f64,
         /// Scale every sensor's noise std by this factor (effects are placed at their
         /// ratio to the scaled noise).
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = 1.0, value_parser = positive_number)]
         noise_scale: f64,
+        /// Scale the sample time by this factor (records keep their duration).
+        #[arg(long, default_value_t = 1.0, value_parser = positive_number)]
+        sample_time_scale: f64,
         /// Diagnose the labelled datasets in this folder instead of generating.
         #[arg(long)]
         datasets: Option<PathBuf>,
@@ -523,6 +526,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             excitation,
             model_spread,
             noise_scale,
+            sample_time_scale,
             datasets,
             write_datasets,
             out,
@@ -537,6 +541,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 excitation,
                 model_spread,
                 noise_scale,
+                sample_time_scale,
             };
             let started = Instant::now();
             let (_, text) = crate::gap::bench::run_bench(
@@ -668,5 +673,31 @@ fn print_files(csv: &Path, json: &Path, plots: &[PathBuf]) {
     println!("wrote {}", json.display());
     for p in plots {
         println!("wrote {}", p.display());
+    }
+}
+
+/// A finite number above zero (a scale factor).
+fn positive_number(text: &str) -> Result<f64, String> {
+    let v: f64 = text
+        .parse()
+        .map_err(|e| format!("`{text}` is not a number: {e}"))?;
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("must be a finite number above 0, found {text}"))
+    }
+}
+
+/// A finite number at or above zero (a spread).
+fn non_negative_number(text: &str) -> Result<f64, String> {
+    let v: f64 = text
+        .parse()
+        .map_err(|e| format!("`{text}` is not a number: {e}"))?;
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!(
+            "must be a finite number at or above 0, found {text}"
+        ))
     }
 }

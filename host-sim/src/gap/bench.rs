@@ -180,6 +180,9 @@ pub struct BenchOptions {
     /// Every sensor's noise std is the bench's default times this (effects are placed at
     /// their ratio to the scaled noise, so they scale with it).
     pub noise_scale: f64,
+    /// The sample time is the bench's default times this, the record as long as by
+    /// default (more or fewer samples).
+    pub sample_time_scale: f64,
 }
 
 /// What a bench plant varies from the bench's defaults.
@@ -188,6 +191,7 @@ struct Variation {
     excitation: Excitation,
     model_spread: f64,
     noise_scale: f64,
+    sample_time_scale: f64,
 }
 
 impl Default for Variation {
@@ -196,6 +200,7 @@ impl Default for Variation {
             excitation: Excitation::Steps,
             model_spread: 0.0,
             noise_scale: 1.0,
+            sample_time_scale: 1.0,
         }
     }
 }
@@ -256,6 +261,7 @@ impl Default for BenchOptions {
             excitation: Excitation::Steps,
             model_spread: 0.0,
             noise_scale: 1.0,
+            sample_time_scale: 1.0,
         }
     }
 }
@@ -271,7 +277,16 @@ struct Clean {
 /// A truth plant the bench can generate from.
 trait BenchPlant: Sync {
     fn plant(&self) -> &'static str;
-    fn dt(&self) -> f64;
+    /// The bench's default sample time (s).
+    fn default_dt(&self) -> f64;
+    /// The sample time of the generated records.
+    fn dt(&self) -> f64 {
+        self.default_dt() * self.variation().sample_time_scale
+    }
+    /// Samples of a record that has `default` samples at the default sample time.
+    fn samples(&self, default: usize) -> usize {
+        (default as f64 / self.variation().sample_time_scale).round() as usize
+    }
     fn outputs(&self) -> Vec<&'static str>;
     /// The bench's default sensor noise std per output.
     fn default_sigma(&self) -> Vec<f64>;
@@ -343,7 +358,7 @@ impl BenchPlant for WheelBench {
     fn plant(&self) -> &'static str {
         "reaction_wheel"
     }
-    fn dt(&self) -> f64 {
+    fn default_dt(&self) -> f64 {
         0.05
     }
     fn outputs(&self) -> Vec<&'static str> {
@@ -375,7 +390,7 @@ impl BenchPlant for WheelBench {
     }
     fn clean(&self, seed: u64, effects: &[(&str, f64)]) -> Clean {
         let dt = self.dt();
-        let n = 6000usize;
+        let n = self.samples(6000);
         let mut rng = stream_rng(seed, 11);
         let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         let command: Vec<f64> = match self.vary.excitation {
@@ -445,13 +460,16 @@ impl BenchPlant for WheelBench {
         }
         // Sub-steps: stable RK4 for driver bandwidths up to 1000 rad/s; the limiters'
         // algebraic loop follows the speed within a sample.
-        let substeps = if wheel.effects.driver_lowpass {
+        let per_default_sample = if wheel.effects.driver_lowpass {
             WHEEL_SUBSTEPS
         } else if wheel.effects.emf_limiting || wheel.effects.speed_limiter {
             4
         } else {
             1
         };
+        let substeps = (per_default_sample as f64 * self.vary.sample_time_scale)
+            .ceil()
+            .max(1.0) as usize;
         wheel.settle(command[0], temperature[0]);
         if wheel.effects.emf_limiting || wheel.effects.speed_limiter {
             // `settle` ignores the limiters: let them pull the wheel to its limited state
@@ -515,7 +533,7 @@ impl BenchPlant for MotorBench {
     fn plant(&self) -> &'static str {
         "dc_motor"
     }
-    fn dt(&self) -> f64 {
+    fn default_dt(&self) -> f64 {
         0.01
     }
     fn outputs(&self) -> Vec<&'static str> {
@@ -538,7 +556,7 @@ impl BenchPlant for MotorBench {
     }
     fn clean(&self, seed: u64, effects: &[(&str, f64)]) -> Clean {
         let dt = self.dt();
-        let n = 2000usize;
+        let n = self.samples(2000);
         let mut rng = stream_rng(seed, 12);
         let mut data = PlantData {
             dt,
@@ -606,7 +624,7 @@ impl BenchPlant for ValveBench {
     fn plant(&self) -> &'static str {
         "valve"
     }
-    fn dt(&self) -> f64 {
+    fn default_dt(&self) -> f64 {
         0.05
     }
     fn outputs(&self) -> Vec<&'static str> {
@@ -750,7 +768,7 @@ impl BenchPlant for ScooterBench {
     fn plant(&self) -> &'static str {
         "scooter"
     }
-    fn dt(&self) -> f64 {
+    fn default_dt(&self) -> f64 {
         0.02
     }
     fn outputs(&self) -> Vec<&'static str> {
@@ -778,7 +796,7 @@ impl BenchPlant for ScooterBench {
     }
     fn clean(&self, seed: u64, effects: &[(&str, f64)]) -> Clean {
         let dt = self.dt();
-        let n = 3000usize;
+        let n = self.samples(3000);
         let mut rng = stream_rng(seed, 15);
         // Driver input held 2-4 s at levels in [-1, 3] V (reversals exercise the dry
         // friction's sign), starting from rest.
@@ -1172,6 +1190,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
         excitation: opts.excitation,
         model_spread: opts.model_spread,
         noise_scale: opts.noise_scale,
+        sample_time_scale: opts.sample_time_scale,
     };
     let bp = bench_plant(plant, vary)
         .ok_or_else(|| SimError::Run(format!("gap-bench has no generator for plant `{plant}`")))?;
