@@ -468,3 +468,32 @@ fn docs_gap_md_lists_every_plant_as_the_code_declares_it() {
         assert!(reference.contains(&format!("### `{plant}`")), "{plant}");
     }
 }
+
+#[test]
+fn a_quantised_fast_channel_takes_its_noise_from_the_residual_not_its_curvature() {
+    // An encoder-like front wheel speed: step 3.5e-3 rad/s over noise 2.5e-4 while the
+    // wheel oscillates, so the raw second differences (about 1e-2) measure the signal. Kept
+    // at that level, the quantiser was no gap at all (verdict `none`).
+    let opts = BenchOptions {
+        plants: vec!["scooter".into()],
+        seeds: 3,
+        ratios: vec![4.0],
+        seed: 2026,
+        only: vec!["quantisation".into()],
+        extra_sets: 0,
+        noise_scale: 0.25,
+        ..BenchOptions::default()
+    };
+    let sets = generate("scooter", &opts).unwrap();
+    let d = sets
+        .iter()
+        .find(|d| d.label.channel.as_deref() == Some("y:front_speed"))
+        .unwrap();
+    let dir = scratch("scooter-quantised");
+    let (_, verdict) = diagnose(&dir, d);
+    assert_eq!(verdict["verdict"], "quantisation:front_speed");
+    let front = &verdict["noise"][2];
+    let std = front["std"].as_f64().unwrap();
+    // At least the rounding (q / sqrt 12 = 1.0e-3), far below the raw estimate.
+    assert!((9e-4..2e-3).contains(&std), "{front}");
+}

@@ -435,11 +435,7 @@ fn still_lattice_step(y: &[f64]) -> Option<f64> {
 fn refine_noise_from_residuals(problem: &mut Problem, noise: &mut [NoiseLevel]) {
     let mut changed = false;
     for (c, level) in noise.iter_mut().enumerate() {
-        // A quantised channel's residual is a staircase minus a smooth replay: its second
-        // differences are nearly all the replay's, not the noise's.
-        if level.source != "differences"
-            || crate::gap::effects::lattice_step(&problem.measured[c]).is_some()
-        {
+        if level.source != "differences" {
             continue;
         }
         let residual: Vec<f64> = problem.measured[c]
@@ -447,9 +443,15 @@ fn refine_noise_from_residuals(problem: &mut Problem, noise: &mut [NoiseLevel]) 
             .zip(&problem.nominal.outputs[c])
             .map(|(y, m)| y - m)
             .collect();
+        // A quantised channel's residual is a staircase minus a smooth replay: where the
+        // signal moves slowly its second differences are mostly zero and measure the steps,
+        // not the noise. Its readings err by at least their rounding, q / sqrt 12.
+        let floor = crate::gap::effects::lattice_step(&problem.measured[c])
+            .map_or(0.0, |q| q / 12f64.sqrt());
         if let Some((s, dof)) = noise_std_from_differences(&residual)
-            && s < problem.sigma[c]
+            && s.max(floor) < problem.sigma[c]
         {
+            let s = s.max(floor);
             problem.sigma[c] = s;
             problem.sigma_dof[c] = dof;
             level.std = s;
