@@ -460,17 +460,23 @@ impl<'a> Problem<'a> {
     /// linear sensitivity): the first measurement carries noise and, under a sensor effect
     /// (bias, scale, saturation, ...), the effect itself, which a slow plant would carry
     /// through the whole record.
+    /// A quantiser is applied after the refit: through its staircase one Gauss-Newton step
+    /// lands anywhere, and its rounding averages out of the fit without it.
     fn with_refitted_start(&self, raw: Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
+        let (quantisers, others): (Vec<_>, Vec<_>) = fitted
+            .iter()
+            .cloned()
+            .partition(|(c, _)| matches!(c, Component::Generic(GenericKind::Quantisation, _)));
         let outputs = refit_start(
             &raw.outputs,
             &self.init_sensitivity,
             &self.measured,
             &self.sigma,
             |k| self.train[k],
-            |outputs| self.apply_generic(outputs, fitted),
+            |outputs| self.apply_generic(outputs, &others),
         );
         Simulation {
-            outputs,
+            outputs: self.apply_generic(outputs, &quantisers),
             states: raw.states,
         }
     }
@@ -796,13 +802,43 @@ impl<'a> Problem<'a> {
 
     fn cost_at(&self, components: &[Component], dims: &[Dim], theta: &[f64]) -> f64 {
         let fitted = assemble(components, dims, theta);
-        match self.predict(&fitted) {
-            Ok(sim) => {
-                let c = self.train_cost(&sim);
-                if c.is_finite() { c } else { f64::INFINITY }
+        let Ok(sim) = self.predict(&fitted) else {
+            return f64::INFINITY;
+        };
+        let quantised = components
+            .iter()
+            .any(|c| matches!(c, Component::Generic(GenericKind::Quantisation, _)));
+        let c = if quantised {
+            self.quantised_train_cost(&sim, &fitted)
+        } else {
+            self.train_cost(&sim)
+        };
+        if c.is_finite() { c } else { f64::INFINITY }
+    }
+
+    /// [`Problem::train_cost`] with a quantiser's channel scored as the held-out score
+    /// does, by its per-sample reading variance (`-2 ln` likelihood up to a constant): by
+    /// squared error alone, a quantiser whose mean misses a few steps is fitted with a
+    /// noise that smooths its mean, which the likelihood then rejects.
+    fn quantised_train_cost(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> f64 {
+        let predicted = self.predicted_variances(&self.quantisers(fitted));
+        let train = self.channel_rss(sim, &self.train);
+        let mut cost = 0.0;
+        for (c, ((rss, _), s)) in train.iter().zip(&self.sigma).enumerate() {
+            let s2 = s * s;
+            let Some(v) = predicted.get(c).and_then(Option::as_ref) else {
+                cost += rss / s2;
+                continue;
+            };
+            let (y, m) = (&self.measured[c], &sim.outputs[c]);
+            for k in 0..y.len() {
+                if self.train[k] && y[k].is_finite() {
+                    let r = y[k] - m[k];
+                    cost += r * r / v[k] + (v[k] / s2).ln();
+                }
             }
-            Err(_) => f64::INFINITY,
         }
+        cost
     }
 
     /// Fits `components` (starting from `start` when given, else from the grid) and scores
