@@ -497,3 +497,32 @@ fn a_quantised_fast_channel_takes_its_noise_from_the_residual_not_its_curvature(
     // At least the rounding (q / sqrt 12 = 1.0e-3), far below the raw estimate.
     assert!((9e-4..2e-3).contains(&std), "{front}");
 }
+
+#[test]
+fn a_coarse_quantiser_over_little_noise_is_fitted_with_that_noise() {
+    // Valve bottom pressure on a lattice of 3.3e5 Pa over 2e4 Pa of noise. The start was
+    // refitted through the quantiser's staircase, which only a smooth (noisy) quantiser
+    // survived: fitted with 1.3e5 Pa of noise, it scored below the model (-230) and the
+    // verdict was a pair with choked_flow.
+    let opts = BenchOptions {
+        plants: vec!["valve".into()],
+        seeds: 1,
+        ratios: vec![2.0, 4.0],
+        seed: 2026,
+        extra_sets: 0,
+        noise_scale: 4.0,
+        ..BenchOptions::default()
+    };
+    // The whole valve set, for its dataset seeds (they follow the order of the sets).
+    let d = generate("valve", &opts)
+        .unwrap()
+        .into_iter()
+        .find(|d| d.name == "valve-quantisation-r4-s0")
+        .unwrap();
+    assert_eq!(d.label.channel.as_deref(), Some("y:pb"));
+    let dir = scratch("valve-quantised");
+    let (_, verdict) = diagnose(&dir, &d);
+    assert_eq!(verdict["verdict"], "quantisation:pb");
+    let noise = verdict["ranking"][0]["params"][1][1].as_f64().unwrap();
+    assert!(noise < 8e4, "pre-quantiser noise {noise}");
+}
