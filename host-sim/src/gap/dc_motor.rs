@@ -11,7 +11,7 @@
 
 use crate::gap::plant::{
     EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, motion_regimes,
-    param,
+    param, substeps_for,
 };
 use std::collections::BTreeMap;
 
@@ -62,9 +62,9 @@ pub const DC_MOTOR_PARAMETERS: &[ParamSpec] = &[
         doc: "speed/current scale of the smooth sign (rad/s, A)",
     },
     ParamSpec {
-        name: "substeps",
-        default: 10.0,
-        doc: "RK4 sub-steps per sample",
+        name: "max_step",
+        default: 0.001,
+        doc: "longest RK4 step (s), whatever the sample time",
     },
 ];
 
@@ -121,7 +121,7 @@ pub fn simulate_motor(
         0.0
     };
     let smooth = g("sign_smoothing").max(1e-9);
-    let substeps = (g("substeps").max(1.0) as u32) * substep_factor.max(1);
+    let max_step = g("max_step");
     let voltage = data.input("voltage").ok_or("missing u:voltage")?;
     let load = data.input("load_torque");
     let n = data.len();
@@ -140,6 +140,7 @@ pub fn simulate_motor(
             break;
         }
         let dt = data.t[s + 1] - data.t[s];
+        let substeps = substeps_for(dt, max_step) * substep_factor.max(1);
         let h = dt / substeps as f64;
         let v = voltage[s];
         for m in 0..substeps {

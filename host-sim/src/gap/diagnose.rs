@@ -26,6 +26,9 @@ pub const EXPLAIN_SHRINK: f64 = 0.7;
 pub const PAIR_TRIGGER: f64 = 0.8;
 /// How many of the best forward pairs are refined jointly.
 pub const PAIR_POOL: usize = 4;
+/// The noise is re-estimated from the verdict's residual when that is below this fraction
+/// of the first estimate.
+pub const NOISE_REFIT_RATIO: f64 = 0.8;
 /// A candidate the held-out data do not prefer the verdict to by at least this many
 /// standard errors ([`crate::gap::effects::separation`]) is reported as confusable with it.
 pub const SEPARATION_Z: f64 = 2.0;
@@ -352,8 +355,17 @@ pub fn diagnose_with(
     };
     problem.refit_nominal();
     refine_noise_from_residuals(&mut problem, &mut noise);
-    let report = analyse(&problem);
+    let mut report = analyse(&problem);
     let (mut verdict, mut ranking, mut pairs) = decide(&problem, &report);
+    // Once an effect explains the data, its residual may show the noise lower still: then
+    // the noise is taken from it and the diagnosis repeated (once).
+    let explained = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
+    if let Some(sim) = explained.and_then(|e| problem.predict(&e.fitted).ok())
+        && refine_noise_from(&mut problem, &mut noise, &sim.outputs, NOISE_REFIT_RATIO)
+    {
+        report = analyse(&problem);
+        (verdict, ranking, pairs) = decide(&problem, &report);
+    }
     let mut held_out_blocks = "odd";
     if verdict == "unknown" {
         // A gap confined to the held-out blocks (a clip of the record's one peak) leaves
@@ -376,7 +388,6 @@ pub fn diagnose_with(
             held_out_blocks = "even (from 2)";
         }
     }
-    let mut report = report;
     let chosen = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
     if let Some(channel) = chosen.and_then(|e| signature_channel(&problem, e)) {
         // The gap lies where the explaining effect changes the model most, in noise units
@@ -430,17 +441,31 @@ fn still_lattice_step(y: &[f64]) -> Option<f64> {
 /// like noise; the replay removes the curvature the model explains, so the residual's
 /// differences are closer to the sensor noise. Both estimates only over-estimate a white
 /// noise (an unexplained smooth gap adds little to second differences), hence the smaller.
-/// Channels on a lattice (a coarse quantiser) keep the raw estimate. The initial condition
-/// is refitted with the new weights.
-fn refine_noise_from_residuals(problem: &mut Problem, noise: &mut [NoiseLevel]) {
+/// A channel on a lattice takes no less than its rounding. The initial condition is
+/// refitted with the new weights.
+fn refine_noise_from_residuals(problem: &mut Problem, noise: &mut [NoiseLevel]) -> bool {
+    let nominal = problem.nominal.outputs.clone();
+    refine_noise_from(problem, noise, &nominal, 1.0)
+}
+
+/// [`refine_noise_from_residuals`] against the replay `outputs` (the model with the
+/// verdict's effect: a gap with content near the Nyquist rate, such as a changed wheel
+/// oscillation, inflates the user's model's residual differences too), taking a channel's
+/// new estimate only when below `ratio` times its level. Whether any level changed.
+fn refine_noise_from(
+    problem: &mut Problem,
+    noise: &mut [NoiseLevel],
+    outputs: &[Vec<f64>],
+    ratio: f64,
+) -> bool {
     let mut changed = false;
     for (c, level) in noise.iter_mut().enumerate() {
-        if level.source != "differences" {
+        if !matches!(level.source, "differences" | "residual differences") {
             continue;
         }
         let residual: Vec<f64> = problem.measured[c]
             .iter()
-            .zip(&problem.nominal.outputs[c])
+            .zip(&outputs[c])
             .map(|(y, m)| y - m)
             .collect();
         // A quantised channel's residual is a staircase minus a smooth replay: where the
@@ -449,7 +474,7 @@ fn refine_noise_from_residuals(problem: &mut Problem, noise: &mut [NoiseLevel]) 
         let floor = crate::gap::effects::lattice_step(&problem.measured[c])
             .map_or(0.0, |q| q / 12f64.sqrt());
         if let Some((s, dof)) = noise_std_from_differences(&residual)
-            && s.max(floor) < problem.sigma[c]
+            && s.max(floor) < ratio * problem.sigma[c]
         {
             let s = s.max(floor);
             problem.sigma[c] = s;
@@ -462,6 +487,7 @@ fn refine_noise_from_residuals(problem: &mut Problem, noise: &mut [NoiseLevel]) 
     if changed {
         problem.refit_nominal();
     }
+    changed
 }
 
 /// The candidates (single and pairs) that the held-out data do not separate from the

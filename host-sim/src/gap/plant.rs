@@ -239,6 +239,16 @@ pub fn derivative(t: &[f64], x: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// Integration sub-steps for one sample of length `dt` with steps of at most `max_step`
+/// (a replay's accuracy then does not depend on the data's sample rate); at least 1.
+pub fn substeps_for(dt: f64, max_step: f64) -> u32 {
+    if !(dt > 0.0 && max_step > 0.0) {
+        return 1;
+    }
+    // The tolerance keeps 0.02 / 0.0025 at 8 despite the time stamps' rounding.
+    ((dt / max_step) * (1.0 - 1e-9)).ceil().clamp(1.0, 1e6) as u32
+}
+
 /// Speed thresholds of [`motion_regimes`] (same unit as the speed, and per second).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MotionThresholds {
