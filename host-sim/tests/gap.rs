@@ -526,3 +526,29 @@ fn a_coarse_quantiser_over_little_noise_is_fitted_with_that_noise() {
     let noise = verdict["ranking"][0]["params"][1][1].as_f64().unwrap();
     assert!(noise < 8e4, "pre-quantiser noise {noise}");
 }
+
+#[test]
+fn a_clip_just_below_the_supply_is_found_at_a_fast_sample_rate() {
+    // The valve's top pressure clipped 0.6 % below the supply, sampled every 25 ms. The
+    // start was refitted by a full Gauss-Newton step through the clip, which threw a
+    // clipped start far off: every clip level but the top one looked terrible, and the
+    // verdict was sensor_scale:pt+output_saturation:pt.
+    let opts = BenchOptions {
+        plants: vec!["valve".into()],
+        seeds: 1,
+        ratios: vec![2.0, 4.0],
+        seed: 2026,
+        extra_sets: 0,
+        sample_time_scale: 0.5,
+        ..BenchOptions::default()
+    };
+    let d = generate("valve", &opts)
+        .unwrap()
+        .into_iter()
+        .find(|d| d.name == "valve-output_saturation-r4-s0")
+        .unwrap();
+    assert_eq!(d.label.channel.as_deref(), Some("y:pt"));
+    let o = run_one(&d).unwrap();
+    assert_eq!(o.verdict, "output_saturation:pt", "top 3: {:?}", o.top3);
+    assert!(o.shrink > 0.8, "shrink {}", o.shrink);
+}

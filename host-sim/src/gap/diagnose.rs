@@ -358,13 +358,25 @@ pub fn diagnose_with(
     let mut report = analyse(&problem);
     let (mut verdict, mut ranking, mut pairs) = decide(&problem, &report);
     // Once an effect explains the data, its residual may show the noise lower still: then
-    // the noise is taken from it and the diagnosis repeated (once).
+    // the noise is taken from it and the diagnosis repeated (once). The repeat is kept
+    // when it too names an effect: an effect that explained the data is not dropped for
+    // what is left of it against the lower noise.
     let explained = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
-    if let Some(sim) = explained.and_then(|e| problem.predict(&e.fitted).ok())
-        && refine_noise_from(&mut problem, &mut noise, &sim.outputs, NOISE_REFIT_RATIO)
-    {
-        report = analyse(&problem);
-        (verdict, ranking, pairs) = decide(&problem, &report);
+    if let Some(sim) = explained.and_then(|e| problem.predict(&e.fitted).ok()) {
+        let (mut sharper, mut sharper_noise) = (problem.clone(), noise.clone());
+        if refine_noise_from(
+            &mut sharper,
+            &mut sharper_noise,
+            &sim.outputs,
+            NOISE_REFIT_RATIO,
+        ) {
+            let sharper_report = analyse(&sharper);
+            let (v, r, p) = decide(&sharper, &sharper_report);
+            if v != "unknown" && v != "none" {
+                (problem, noise, report) = (sharper, sharper_noise, sharper_report);
+                (verdict, ranking, pairs) = (v, r, p);
+            }
+        }
     }
     let mut held_out_blocks = "odd";
     if verdict == "unknown" {
