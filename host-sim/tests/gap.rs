@@ -498,27 +498,36 @@ fn a_quantised_fast_channel_takes_its_noise_from_the_residual_not_its_curvature(
     assert!((9e-4..2e-3).contains(&std), "{front}");
 }
 
-#[test]
-fn a_coarse_quantiser_over_little_noise_is_fitted_with_that_noise() {
-    // Valve bottom pressure on a lattice of 3.3e5 Pa over 2e4 Pa of noise. The start was
-    // refitted through the quantiser's staircase, which only a smooth (noisy) quantiser
-    // survived: fitted with 1.3e5 Pa of noise, it scored below the model (-230) and the
-    // verdict was a pair with choked_flow.
+/// The dataset `name` of the valve's single-effect sets (one seed, ratios 2 and 4, base
+/// seed 2026) generated with `options`' sensor and sample-time variation. The whole set is
+/// generated, as the dataset seeds follow the order of the sets.
+fn valve_set(name: &str, options: BenchOptions) -> Dataset {
     let opts = BenchOptions {
         plants: vec!["valve".into()],
         seeds: 1,
         ratios: vec![2.0, 4.0],
         seed: 2026,
         extra_sets: 0,
+        ..options
+    };
+    generate("valve", &opts)
+        .unwrap()
+        .into_iter()
+        .find(|d| d.name == name)
+        .unwrap()
+}
+
+#[test]
+fn a_coarse_quantiser_over_little_noise_is_fitted_with_that_noise() {
+    // Valve bottom pressure on a lattice of 3.3e5 Pa over 2e4 Pa of noise. The start was
+    // refitted through the quantiser's staircase, which only a smooth (noisy) quantiser
+    // survived: fitted with 1.3e5 Pa of noise, it scored below the model (-230) and the
+    // verdict was a pair with choked_flow.
+    let options = BenchOptions {
         noise_scale: 4.0,
         ..BenchOptions::default()
     };
-    // The whole valve set, for its dataset seeds (they follow the order of the sets).
-    let d = generate("valve", &opts)
-        .unwrap()
-        .into_iter()
-        .find(|d| d.name == "valve-quantisation-r4-s0")
-        .unwrap();
+    let d = valve_set("valve-quantisation-r4-s0", options);
     assert_eq!(d.label.channel.as_deref(), Some("y:pb"));
     let dir = scratch("valve-quantised");
     let (_, verdict) = diagnose(&dir, &d);
@@ -533,20 +542,11 @@ fn a_clip_just_below_the_supply_is_found_at_a_fast_sample_rate() {
     // start was refitted by a full Gauss-Newton step through the clip, which threw a
     // clipped start far off: every clip level but the top one looked terrible, and the
     // verdict was sensor_scale:pt+output_saturation:pt.
-    let opts = BenchOptions {
-        plants: vec!["valve".into()],
-        seeds: 1,
-        ratios: vec![2.0, 4.0],
-        seed: 2026,
-        extra_sets: 0,
+    let options = BenchOptions {
         sample_time_scale: 0.5,
         ..BenchOptions::default()
     };
-    let d = generate("valve", &opts)
-        .unwrap()
-        .into_iter()
-        .find(|d| d.name == "valve-output_saturation-r4-s0")
-        .unwrap();
+    let d = valve_set("valve-output_saturation-r4-s0", options);
     assert_eq!(d.label.channel.as_deref(), Some("y:pt"));
     let o = run_one(&d).unwrap();
     assert_eq!(o.verdict, "output_saturation:pt", "top 3: {:?}", o.top3);
