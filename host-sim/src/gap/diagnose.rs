@@ -25,7 +25,9 @@ pub const EXPLAIN_SHRINK: f64 = 0.7;
 /// Below this shrink for the best single effect, pairs are tried.
 pub const PAIR_TRIGGER: f64 = 0.8;
 /// How many of the best forward pairs are refined jointly.
-pub const PAIR_POOL: usize = 4;
+pub const PAIR_POOL: usize = 8;
+/// Besides pairs with the best single effect, pairs among this many next-best singles.
+pub const PAIR_RUNNER_UPS: usize = 6;
 /// The noise is re-estimated from the verdict's residual when that is below this fraction
 /// of the first estimate.
 pub const NOISE_REFIT_RATIO: f64 = 0.8;
@@ -703,20 +705,27 @@ pub fn decide(
     if explains(&best) && (best.shrink >= PAIR_TRIGGER || best.gap_after < resolution) {
         return (best.effect.clone(), evaluated, Vec::new());
     }
-    // Forward step: every other candidate added to the best single effect, both fitted
-    // jointly from their single fits (one coarse pass); the best few pairs are refined.
-    let first = best.fitted[0].0.clone();
-    let first_values = flat_values(&best);
-    let forward: Vec<Evaluation> = evaluated[1..]
+    // Forward step: every other candidate added to the best single effect; and every pair
+    // among the next few singles (the best single may be a mimic of one member of the true
+    // pair, as a speed bias is of Coulomb friction on a one-signed speed). Each pair is
+    // fitted jointly from its single fits (one coarse pass); the best few are refined.
+    let same_generic = |a: &Component, b: &Component| matches!((a, b), (Component::Generic(ka, x), Component::Generic(kb, y)) if ka == kb && x == y);
+    let runner_ups = evaluated.len().min(PAIR_RUNNER_UPS + 1);
+    let candidates: Vec<(usize, usize)> = (1..evaluated.len())
+        .map(|j| (0, j))
+        .chain((1..runner_ups).flat_map(|i| (i + 1..runner_ups).map(move |j| (i, j))))
+        .filter(|&(i, j)| !same_generic(&evaluated[i].fitted[0].0, &evaluated[j].fitted[0].0))
+        .collect();
+    let forward: Vec<Evaluation> = candidates
         .par_iter()
-        .filter(|e| {
-            let c = &e.fitted[0].0;
-            !matches!((&first, c), (Component::Generic(ka, x), Component::Generic(kb, y)) if ka == kb && x == y)
-        })
-        .filter_map(|e| {
-            let mut start = first_values.clone();
-            start.extend(flat_values(e));
-            problem.fit(&[first.clone(), e.fitted[0].0.clone()], Some(&start))
+        .filter_map(|&(i, j)| {
+            let (a, b) = (&evaluated[i], &evaluated[j]);
+            let mut start = flat_values(a);
+            start.extend(flat_values(b));
+            problem.fit(
+                &[a.fitted[0].0.clone(), b.fitted[0].0.clone()],
+                Some(&start),
+            )
         })
         .collect();
     let mut forward = forward;
