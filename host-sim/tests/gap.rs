@@ -489,6 +489,21 @@ fn gap_finds_torque_ripple_while_the_model_speed_is_off() {
 }
 
 #[test]
+fn gap_fits_a_lubricant_torque_phase_near_zero() {
+    // The periodic torque's phase was searched over one period [0, 2 pi] from the middle;
+    // a truth phase of -0.2 rad (= 6.1) tied the grid's two ends and the fit stopped on
+    // the edge at 0: shrink 0.79, one held-out block far above the noise.
+    let sets = generated("reaction_wheel", &[], &[2.0, 4.0], 2026, 0);
+    let d = sets
+        .iter()
+        .find(|d| d.name == "reaction_wheel-lubricant_torque_noise-r4-s0")
+        .unwrap();
+    let o = run_one(d).unwrap();
+    assert_eq!(o.verdict, "lubricant_torque_noise", "top 3: {:?}", o.top3);
+    assert!(o.shrink > 0.9, "{}", o.shrink);
+}
+
+#[test]
 fn gap_finds_a_clip_of_the_one_peak_by_swapping_the_folds() {
     // The clipped peak lies in a held-out block, so the training blocks show nothing to
     // fit and the first fold answers `unknown`; fitted on the odd blocks, the clip is found.

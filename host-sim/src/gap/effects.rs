@@ -1054,13 +1054,21 @@ fn grid_then_golden(
     let step = (hi - lo) / (grid - 1) as f64;
     let at = |g: usize| lo + g as f64 * step;
     let costs: Vec<f64> = (0..grid).map(|g| eval(at(g))).collect();
-    let (g_best, c_best) = costs
+    let (mut g_best, c_best) = costs
         .iter()
         .copied()
         .enumerate()
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .unwrap_or((0, f64::INFINITY));
     let tied = |g: usize| (costs[g] - c_best).abs() <= 1e-12 * c_best.abs().max(1e-300);
+    // A periodic parameter searched over whole periods costs the same at both ends and
+    // inside, to rounding: the edge's bracket holds only one side of the minimum.
+    if g_best == 0 || g_best == grid - 1 {
+        let same = |g: usize| (costs[g] - c_best).abs() <= 1e-9 * c_best.abs().max(1e-300);
+        if let Some(g) = (1..grid - 1).find(|&g| same(g)) {
+            g_best = g;
+        }
+    }
     let (mut p0, mut p1) = (g_best, g_best);
     while p0 > 0 && tied(p0 - 1) {
         p0 -= 1;
@@ -1319,6 +1327,19 @@ mod tests {
             c >= 100.0 - 1e-9,
             "without the edge search the valley is missed: {u} {c}"
         );
+    }
+
+    #[test]
+    fn a_periodic_minimum_near_the_period_edge_is_found_inside_the_range() {
+        // A phase over two periods with its minimum at -0.21 rad: the grid points -2 pi, 0
+        // and 2 pi cost the same to rounding, and the first of them, an edge, bracketed
+        // only [-2 pi, -2 pi + step], so the fit ended on the edge.
+        let tau = std::f64::consts::TAU;
+        let phase = |u: f64| -tau + 2.0 * tau * u;
+        let mut cost = |u: f64| 1.0 - (phase(u) + 0.21).cos();
+        let (u, c) = grid_then_golden(&mut cost, 0.0, 1.0, 13, 32, Some(&mut |_| 0.0));
+        let wrapped = (phase(u) + 0.21).rem_euclid(tau);
+        assert!(wrapped.min(tau - wrapped) < 1e-3 && c < 1e-6, "{} {c}", phase(u));
     }
 
     #[test]

@@ -219,9 +219,12 @@ pub fn wheel_effects() -> Vec<EffectSpec> {
                     scale: Scale::Log,
                     side: Side::Either,
                 },
+                // Two periods: every phase then has a representative at least half a
+                // period from either end of the search (over one period, a phase near
+                // 0 = 2 pi sat at the grid's edge and was fitted as 0).
                 FitRange {
                     name: "noise_phase",
-                    lo: 0.0,
+                    lo: -std::f64::consts::TAU,
                     hi: std::f64::consts::TAU,
                     scale: Scale::Linear,
                     side: Side::Either,
