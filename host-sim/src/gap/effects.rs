@@ -1339,7 +1339,11 @@ mod tests {
         let mut cost = |u: f64| 1.0 - (phase(u) + 0.21).cos();
         let (u, c) = grid_then_golden(&mut cost, 0.0, 1.0, 13, 32, Some(&mut |_| 0.0));
         let wrapped = (phase(u) + 0.21).rem_euclid(tau);
-        assert!(wrapped.min(tau - wrapped) < 1e-3 && c < 1e-6, "{} {c}", phase(u));
+        assert!(
+            wrapped.min(tau - wrapped) < 1e-3 && c < 1e-6,
+            "{} {c}",
+            phase(u)
+        );
     }
 
     #[test]
