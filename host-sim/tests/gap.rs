@@ -552,6 +552,21 @@ fn a_sensor_verdict_is_located_on_its_sensor() {
 }
 
 #[test]
+fn a_valve_leak_or_friction_is_located_in_noise_units_of_the_explained_residual() {
+    // These effects move y:x and a chamber pressure within a few per cent of each other
+    // in noise units. The pressures' noise from second differences also carries their fast
+    // transients (5-10 % high), which put both sets on y:x; the explained residual's RMS
+    // is the noise itself.
+    for effect in ["friction_increase", "internal_leak"] {
+        let d = one("valve", effect, 4.0);
+        assert_eq!(d.label.channel.as_deref(), Some("y:pb"), "{}", d.name);
+        let o = run_one(&d).unwrap();
+        assert_eq!(o.verdict, effect, "{o:#?}");
+        assert_eq!(o.channel, "y:pb", "{o:#?}");
+    }
+}
+
+#[test]
 fn docs_gap_md_lists_every_plant_as_the_code_declares_it() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/gap.md");
     let page = std::fs::read_to_string(&path).unwrap();
