@@ -535,7 +535,7 @@ fn gap_finds_both_external_leaks_in_progpy_default_state_trace() {
 }
 
 #[test]
-fn a_sensor_verdict_is_located_on_its_sensor() {
+fn a_valve_verdict_is_located_where_it_changes_the_model_most() {
     // The gap is located where the explaining effect changes the model most: the residual's
     // own NIS also carries each channel's noise-estimate error, and the valve's four
     // channels are close. This quantised y:pt (the bench's --seed 7 folder) was located on
@@ -549,18 +549,14 @@ fn a_sensor_verdict_is_located_on_its_sensor() {
     let o = run_one(d).unwrap();
     assert_eq!(o.verdict, "quantisation:pt", "{o:#?}");
     assert_eq!(o.channel, "y:pt", "{o:#?}");
-}
-
-#[test]
-fn a_valve_leak_or_friction_is_located_in_noise_units_of_the_explained_residual() {
-    // These effects move y:x and a chamber pressure within a few per cent of each other
-    // in noise units. The pressures' noise from second differences also carries their fast
-    // transients (5-10 % high), which put both sets on y:x; the explained residual's RMS
-    // is the noise itself.
+    // These move y:x and y:pb within a few per cent of each other in noise units. The
+    // pressures' noise from second differences also carries their fast transients (5-10 %
+    // high), which put both on y:x; the explained residual's RMS is the noise itself.
     for effect in ["friction_increase", "internal_leak"] {
-        let d = one("valve", effect, 4.0);
-        assert_eq!(d.label.channel.as_deref(), Some("y:pb"), "{}", d.name);
-        let o = run_one(&d).unwrap();
+        let name = format!("valve-{effect}-r4-s0");
+        let d = sets.iter().find(|d| d.name == name).unwrap();
+        assert_eq!(d.label.channel.as_deref(), Some("y:pb"), "{name}");
+        let o = run_one(d).unwrap();
         assert_eq!(o.verdict, effect, "{o:#?}");
         assert_eq!(o.channel, "y:pb", "{o:#?}");
     }
