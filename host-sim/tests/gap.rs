@@ -338,6 +338,9 @@ fn gap_recovers_the_isentropic_critical_ratio_from_progpy_data() {
     let b = top["params"][0][1].as_f64().unwrap();
     assert!((b / 0.528_281_8 - 1.0).abs() < 0.02, "b = {b}");
     assert!(top["shrink"].as_f64().unwrap() > 0.9, "{top:#}");
+    // Located in the declared noise units (the noise-free trace's residual is no noise
+    // level: in its units the closely fitted y:x came out first).
+    assert_eq!(v["where"]["channel"], "y:pb");
     let v = told("default", "");
     assert_eq!(v["verdict"], "none");
     assert!(
@@ -532,6 +535,7 @@ fn gap_finds_both_external_leaks_in_progpy_default_state_trace() {
         assert!((area / 1e-5 - 1.0).abs() < 1e-3, "{p}");
     }
     assert!(pair["shrink"].as_f64().unwrap() > 0.99, "{pair:#}");
+    assert_eq!(v["where"]["channel"], "y:pb");
 }
 
 #[test]

@@ -530,10 +530,11 @@ fn confusable_with(
 }
 
 /// The channel on which `effect`'s fitted correction to the model is largest relative to
-/// the channel's noise (RMS over the record). The noise is the smaller of the diagnosis'
-/// level and the RMS of the corrected residual: with the gap explained that residual is
-/// the noise itself, while second differences also carry a fast signal's curvature (5-10 %
-/// on the valve's pressures, as much as the channels' signatures differ by).
+/// the channel's noise (RMS over the record). A level estimated from the data is replaced
+/// by the RMS of the corrected residual when that is smaller: with the gap explained that
+/// residual is the noise itself, while second differences also carry a fast signal's
+/// curvature (5-10 % on the valve's pressures, as much as the channels' signatures differ
+/// by). A level declared in the meta file is the user's and is kept.
 fn signature_channel(problem: &Problem, effect: &Evaluation) -> Option<usize> {
     let corrected = problem.predict(&effect.fitted).ok()?;
     let rms = |v: &mut dyn Iterator<Item = f64>| {
@@ -546,10 +547,16 @@ fn signature_channel(problem: &Problem, effect: &Evaluation) -> Option<usize> {
         .outputs
         .iter()
         .zip(&problem.nominal.outputs)
-        .zip(problem.sigma.iter().zip(&problem.measured))
-        .map(|((a, b), (s, y))| {
+        .zip(problem.sigma.iter().zip(&problem.sigma_dof))
+        .zip(&problem.measured)
+        .map(|(((a, b), (s, dof)), y)| {
             let residual = rms(&mut y.iter().zip(a).map(|(y, m)| y - m));
-            let noise = if residual > 0.0 { s.min(residual) } else { *s };
+            let estimated = dof.is_finite();
+            let noise = if estimated && residual > 0.0 {
+                s.min(residual)
+            } else {
+                *s
+            };
             rms(&mut a.iter().zip(b).map(|(x, y)| (x - y) / noise))
         })
         .enumerate()
