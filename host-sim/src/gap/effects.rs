@@ -1162,17 +1162,27 @@ pub const HELD_OUT_BATCHES: usize = 20;
 /// difference `delta` with variance twice that, so `z = sqrt(D / 2)`. (2) The spread of the
 /// per-batch log-likelihood differences (a batch-means form of Vuong's test for non-nested
 /// models), which also covers model error; alone it cannot exceed 1 when all the evidence
-/// sits in one batch (a single transient), hence (1). NaN without batches.
+/// sits in one batch (a single transient), hence (1). Below [`MIN_EVIDENCE`] nats only (1)
+/// counts: two all but equal predictions differ consistently in every batch, which makes
+/// (2) large for no evidence (three offsets of a one-signed speed within 1e-5 nats were
+/// reported as separated). NaN without batches.
 pub fn separation(a: &Evaluation, b: &Evaluation) -> f64 {
     let diff = a.absolute_score - b.absolute_score;
     let by_noise = if diff > 0.0 { (0.5 * diff).sqrt() } else { 0.0 };
     let by_batches = batch_separation(a, b);
     if by_batches.is_nan() {
         by_batches
+    } else if diff.abs() < MIN_EVIDENCE {
+        by_noise
     } else {
         by_batches.max(by_noise)
     }
 }
+
+/// A held-out log-likelihood difference (nats) below which two candidates are not told
+/// apart by how consistently it is spread (a likelihood ratio below e: "not worth more
+/// than a bare mention" on Jeffreys' scale).
+pub const MIN_EVIDENCE: f64 = 1.0;
 
 fn batch_separation(a: &Evaluation, b: &Evaluation) -> f64 {
     let d: Vec<f64> = a
@@ -1390,6 +1400,12 @@ mod tests {
         let total: f64 = even.iter().sum();
         let c = eval(total, even);
         assert!(separation(&c, &b) > 50.0);
+        // A consistent but negligible difference (1e-6 nats per batch) is no separation.
+        let tiny: Vec<f64> = vec![1e-6; HELD_OUT_BATCHES];
+        let total: f64 = tiny.iter().sum();
+        let d = eval(total, tiny);
+        assert!(batch_separation(&d, &b) > 1e6);
+        assert!(separation(&d, &b) < 0.01, "{}", separation(&d, &b));
         // Equal candidates are not separated; the worse one has z <= 0.
         assert_eq!(separation(&b, &b), 0.0);
         assert!(separation(&b, &a) <= 0.0);
