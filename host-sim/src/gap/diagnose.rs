@@ -26,7 +26,8 @@ pub const EXPLAIN_SHRINK: f64 = 0.7;
 pub const PAIR_TRIGGER: f64 = 0.8;
 /// How many of the best forward pairs are refined jointly.
 pub const PAIR_POOL: usize = 8;
-/// Besides pairs with the best single effect, pairs among this many next-best singles.
+/// Besides pairs with the best single effect, pairs among this many next-best singles by
+/// held-out score and as many by training cost.
 pub const PAIR_RUNNER_UPS: usize = 6;
 /// The noise is re-estimated from the verdict's residual when that is below this fraction
 /// of the first estimate.
@@ -729,10 +730,26 @@ pub fn decide(
     // pair, as a speed bias is of Coulomb friction on a one-signed speed). Each pair is
     // fitted jointly from its single fits (one coarse pass); the best few are refined.
     let same_generic = |a: &Component, b: &Component| matches!((a, b), (Component::Generic(ka, x), Component::Generic(kb, y)) if ka == kb && x == y);
-    let runner_ups = evaluated.len().min(PAIR_RUNNER_UPS + 1);
+    // The runner-ups: the next few by held-out score, and the few that lower the training
+    // cost most. A member of a pair can fit the training blocks and still lose held-out
+    // likelihood alone, its fit bent by the other member's missing part (a driver lag and
+    // a temperature-dependent viscosity each scored -300 nats and worse alone).
+    let mut by_training: Vec<usize> = (1..evaluated.len()).collect();
+    by_training.sort_by(|&a, &b| evaluated[a].train_cost.total_cmp(&evaluated[b].train_cost));
+    let mut runner_ups: Vec<usize> = (1..evaluated.len().min(PAIR_RUNNER_UPS + 1)).collect();
+    for i in by_training.into_iter().take(PAIR_RUNNER_UPS) {
+        if !runner_ups.contains(&i) {
+            runner_ups.push(i);
+        }
+    }
+    let runner_up_pairs = runner_ups.iter().enumerate().flat_map(|(a, &i)| {
+        runner_ups[a + 1..]
+            .iter()
+            .map(move |&j| (i.min(j), i.max(j)))
+    });
     let candidates: Vec<(usize, usize)> = (1..evaluated.len())
         .map(|j| (0, j))
-        .chain((1..runner_ups).flat_map(|i| (i + 1..runner_ups).map(move |j| (i, j))))
+        .chain(runner_up_pairs)
         .filter(|&(i, j)| !same_generic(&evaluated[i].fitted[0].0, &evaluated[j].fitted[0].0))
         .collect();
     let forward: Vec<Evaluation> = candidates
