@@ -46,6 +46,14 @@ fn generated(
     generate(plant, &opts).unwrap()
 }
 
+/// The pair set among `generated(plant, &[only], &[ratio], seed, 1)`.
+fn first_pair(plant: &str, only: &str, ratio: f64, seed: u64) -> Dataset {
+    generated(plant, &[only], &[ratio], seed, 1)
+        .into_iter()
+        .find(|d| d.label.kind == CaseKind::Pair)
+        .unwrap()
+}
+
 fn one(plant: &str, effect: &str, ratio: f64) -> Dataset {
     generated(plant, &[effect], &[ratio], 7, 0).remove(0)
 }
@@ -387,11 +395,7 @@ fn gap_says_unknown_for_an_inlet_sensor_offset_a_stiffer_spring_would_fit() {
 fn gap_finds_a_leak_and_seal_pair_whose_parameters_trade_off() {
     // Leak area and seal stiffness trade off along a valley that one coordinate pass
     // crawls along (shrink 0.66, verdict `unknown`); the joint polish reaches the pair.
-    let sets = generated("valve", &["friction_increase"], &[4.0], 7, 1);
-    let d = sets
-        .iter()
-        .find(|d| d.label.kind == CaseKind::Pair)
-        .unwrap();
+    let d = &first_pair("valve", "friction_increase", 4.0, 7);
     assert_eq!(d.label.effects, ["top_external_leak", "seal_contact"]);
     assert_found(d, "top_external_leak+seal_contact", 0.8);
 }
@@ -401,11 +405,7 @@ fn gap_finds_a_pair_whose_best_single_mimic_is_neither_member() {
     // On a one-signed wheel speed a speed bias mimics Coulomb friction and outscores both
     // true effects alone; the pairs were formed only with the best single (the bias), so
     // viscous_temperature + coulomb_friction was never fitted and the verdict was `unknown`.
-    let sets = generated("reaction_wheel", &["coulomb_friction"], &[2.0], 21, 1);
-    let d = sets
-        .iter()
-        .find(|d| d.label.kind == CaseKind::Pair)
-        .unwrap();
+    let d = &first_pair("reaction_wheel", "coulomb_friction", 2.0, 21);
     assert_eq!(d.label.effects, ["viscous_temperature", "coulomb_friction"]);
     let o = assert_found(d, "viscous_temperature+coulomb_friction", 0.9);
     assert_eq!(
@@ -449,11 +449,7 @@ fn gap_pairs_singles_that_fit_the_training_blocks_but_lose_alone() {
     // A driver lag and a temperature-dependent viscosity at ratio 2: each alone fits the
     // training blocks best of all singles but bends to the other's missing part and loses
     // 300-540 nats held out (ranks 16 and 19), so no pair held both (verdict `unknown`).
-    let sets = generated("reaction_wheel", &["no-such-effect"], &[2.0], 77, 1);
-    let d = sets
-        .iter()
-        .find(|d| d.label.kind == CaseKind::Pair)
-        .unwrap();
+    let d = &first_pair("reaction_wheel", "no-such-effect", 2.0, 77);
     assert_eq!(d.label.effects, ["viscous_temperature", "driver_lowpass"]);
     let o = run_one(d).unwrap();
     // The lag is confusable with a speed-sensor lag or delay (docs/gap.md).
