@@ -387,8 +387,11 @@ pub fn diagnose_with(
         // the training blocks nothing to fit: before answering `unknown`, fit on the odd
         // blocks and score on the even ones. Block 0 stays in training (the initial
         // condition is pinned there; held out, its start transient would be the gap). This
-        // second look admits a single effect only: a pair is flexible enough to mimic an
-        // effect outside the catalogue on one of two folds.
+        // second look admits a single effect, and a pair only when it was also the first
+        // fold's best pair and shrank that fold's gap by `PAIR_TRIGGER`: a pair is flexible
+        // enough to mimic an effect outside the catalogue on one of two folds, but a regime
+        // only the first fold holds out (a zero crossing where cogging is felt most) fails
+        // its block test there alone.
         let first_block = |k: usize| k * BLOCKS / n == 0;
         let mut swapped = problem.clone();
         swapped.train = (0..n).map(|k| problem.test[k] || first_block(k)).collect();
@@ -397,7 +400,18 @@ pub fn diagnose_with(
             .collect();
         swapped.refit_nominal();
         let (v, r, p) = decide(&swapped, &report);
-        if v != "unknown" && r.iter().any(|e| e.effect == v) {
+        let same_members = |a: &str, b: &str| {
+            let members = |s: &str| {
+                let mut m: Vec<String> = s.split('+').map(str::to_string).collect();
+                m.sort_unstable();
+                m
+            };
+            members(a) == members(b)
+        };
+        let agreed_pair = pairs
+            .first()
+            .is_some_and(|first| first.shrink >= PAIR_TRIGGER && same_members(&first.effect, &v));
+        if v != "unknown" && (r.iter().any(|e| e.effect == v) || agreed_pair) {
             (verdict, ranking, pairs) = (v, r, p);
             problem = swapped;
             held_out_blocks = "even (from 2)";
