@@ -54,6 +54,11 @@ fn first_pair(plant: &str, only: &str, ratio: f64, seed: u64) -> Dataset {
         .unwrap()
 }
 
+/// The set called `name` among `sets`.
+fn named(sets: Vec<Dataset>, name: &str) -> Dataset {
+    sets.into_iter().find(|d| d.name == name).unwrap()
+}
+
 fn one(plant: &str, effect: &str, ratio: f64) -> Dataset {
     generated(plant, &[effect], &[ratio], 7, 0).remove(0)
 }
@@ -419,11 +424,10 @@ fn gap_finds_a_pair_of_two_singles_ranked_below_sensor_mimics() {
     // Friction and a weaker spring at ratio 8 each: alone neither shrinks the gap by more
     // than 0.06, and four sensor delays and lags on y:x and y:q outscore both, so they were
     // the 5th and 6th singles and never fitted together (verdict `unknown`).
-    let sets = generated("valve", &["friction_increase"], &[2.0], 21, 3);
-    let d = sets
-        .iter()
-        .find(|d| d.name == "valve-pair-friction_increase+spring_weakening-r8-s2")
-        .unwrap();
+    let d = &named(
+        generated("valve", &["friction_increase"], &[2.0], 21, 3),
+        "valve-pair-friction_increase+spring_weakening-r8-s2",
+    );
     assert_found(d, "friction_increase+spring_weakening", 0.9);
 }
 
@@ -472,11 +476,10 @@ fn a_pair_whose_regime_only_the_first_fold_holds_out_is_taken_from_the_second() 
     // zero speed: the zero crossing, where cogging is felt most, lies in held-out block 9.
     // Fitted on the even blocks the pair shrinks the gap by 0.943 but block 9 keeps
     // p 1e-226 (verdict `unknown`); fitted on the odd blocks the same pair passes.
-    let sets = generated("reaction_wheel", &["no-such-effect"], &[2.0], 77, 12);
-    let d = sets
-        .iter()
-        .find(|d| d.name == "reaction_wheel-pair-viscous_temperature+cogging-r8-s11")
-        .unwrap();
+    let d = &named(
+        generated("reaction_wheel", &["no-such-effect"], &[2.0], 77, 12),
+        "reaction_wheel-pair-viscous_temperature+cogging-r8-s11",
+    );
     let o = assert_found(d, "cogging+viscous_temperature", 0.9);
     assert_eq!(o.channel, "y:speed");
 }
@@ -509,11 +512,10 @@ fn a_single_that_mimics_a_load_step_on_average_is_not_the_verdict() {
 fn gap_finds_torque_ripple_while_the_model_speed_is_off() {
     // The set of the session-9 wm1 bench: the ripple's phase came from the replayed speed,
     // so its fit shrank the gap by 0.64 only and the verdict was `unknown`.
-    let sets = generated("reaction_wheel", &[], &[2.0, 4.0], 2026, 0);
-    let d = sets
-        .iter()
-        .find(|d| d.name == "reaction_wheel-torque_ripple-r4-s0")
-        .unwrap();
+    let d = &named(
+        generated("reaction_wheel", &[], &[2.0, 4.0], 2026, 0),
+        "reaction_wheel-torque_ripple-r4-s0",
+    );
     assert_found(d, "torque_ripple", 0.9);
 }
 
@@ -522,11 +524,10 @@ fn gap_fits_a_lubricant_torque_phase_near_zero() {
     // The periodic torque's phase was searched over one period [0, 2 pi] from the middle;
     // a truth phase of -0.2 rad (= 6.1) tied the grid's two ends and the fit stopped on
     // the edge at 0: shrink 0.79, one held-out block far above the noise.
-    let sets = generated("reaction_wheel", &[], &[2.0, 4.0], 2026, 0);
-    let d = sets
-        .iter()
-        .find(|d| d.name == "reaction_wheel-lubricant_torque_noise-r4-s0")
-        .unwrap();
+    let d = &named(
+        generated("reaction_wheel", &[], &[2.0, 4.0], 2026, 0),
+        "reaction_wheel-lubricant_torque_noise-r4-s0",
+    );
     assert_found(d, "lubricant_torque_noise", 0.9);
 }
 
