@@ -400,17 +400,12 @@ pub fn diagnose_with(
             .collect();
         swapped.refit_nominal();
         let (v, r, p) = decide(&swapped, &report);
-        let same_members = |a: &str, b: &str| {
-            let members = |s: &str| {
-                let mut m: Vec<String> = s.split('+').map(str::to_string).collect();
-                m.sort_unstable();
-                m
-            };
-            members(a) == members(b)
+        let agreed_pair = match (pairs.first(), p.iter().find(|e| e.effect == v)) {
+            (Some(first), Some(second)) => {
+                first.shrink >= PAIR_TRIGGER && first.same_effects(second)
+            }
+            _ => false,
         };
-        let agreed_pair = pairs
-            .first()
-            .is_some_and(|first| first.shrink >= PAIR_TRIGGER && same_members(&first.effect, &v));
         if v != "unknown" && (r.iter().any(|e| e.effect == v) || agreed_pair) {
             (verdict, ranking, pairs) = (v, r, p);
             problem = swapped;

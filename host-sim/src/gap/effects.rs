@@ -352,6 +352,19 @@ pub struct Evaluation {
     pub channel_rss: Vec<[f64; 4]>,
 }
 
+impl Evaluation {
+    /// Whether `other` adds the same effects, in any order (a pair is named after its
+    /// members' ranking, which two folds need not share).
+    pub fn same_effects(&self, other: &Evaluation) -> bool {
+        fn sorted(e: &Evaluation) -> Vec<&str> {
+            let mut c: Vec<&str> = e.components.iter().map(String::as_str).collect();
+            c.sort_unstable();
+            c
+        }
+        sorted(self) == sorted(other)
+    }
+}
+
 impl<'a> Problem<'a> {
     /// Name of a component.
     pub fn component_name(&self, c: &Component) -> String {
