@@ -470,6 +470,9 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
         Command::Gap { data, out, meta } => {
             let started = Instant::now();
             let diagnosis = crate::gap::diagnose_files(&data, meta.as_deref())?;
+            for w in &diagnosis.warnings {
+                eprintln!("warning: {w}");
+            }
             let files = crate::gap::report::write_report(&out, &diagnosis)?;
             let l = &diagnosis.location;
             println!("plant: {}", diagnosis.plant);

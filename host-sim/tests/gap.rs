@@ -2,16 +2,32 @@
 //! its bad-input errors (exit status 2, file:line:column), and a small bounded gap-bench.
 
 use prognos_sim::gap::bench::{
-    BenchOptions, CaseKind, Dataset, Excitation, Outcome, generate, run_one, score,
+    BenchOptions, CaseKind, Dataset, Excitation, Outcome, generate, run_bench, run_one, score,
 };
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn scratch(name: &str) -> PathBuf {
+/// A fresh folder under the system's temporary folder, removed when dropped.
+struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("prognos-gap-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    Scratch(dir)
 }
 
 fn prognos(args: &[&str]) -> Output {
@@ -276,6 +292,127 @@ fn bad_input_exits_2_and_says_which_and_where() {
         err.contains(&format!("{c}:51:1: too little data to split: 50 samples")),
         "{err}"
     );
+}
+
+#[test]
+fn gap_reads_a_stem_named_meta_file_and_warns_about_what_it_ignores() {
+    // Independently prepared data: `data.meta.toml` (not `data.csv.meta.toml`) without
+    // `dt`, a preparer's own key, and a column the plant does not read. The diagnosis runs;
+    // each ignored thing is a warning at its line and column, on stderr and in the verdict.
+    let dir = scratch("stem-meta");
+    let d = one("dc_motor", "coulomb_friction", 4.0);
+    let csv: String = d
+        .csv
+        .lines()
+        .enumerate()
+        .map(|(i, l)| format!("{l},{}\n", if i == 0 { "u:spare" } else { "1" }))
+        .collect();
+    let data = dir.join("data.csv");
+    std::fs::write(&data, csv).unwrap();
+    let meta: String = d
+        .meta
+        .lines()
+        .filter(|l| !l.starts_with("dt ="))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(dir.join("data.meta.toml"), format!("seed = 17\n{meta}")).unwrap();
+    let out = dir.join("out");
+    let o = prognos(&["gap", "--data", s(&data), "--out", s(&out)]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let m = s(&dir.join("data.meta.toml")).to_string();
+    assert!(
+        err.contains(&format!("warning: {m}:1:1: ignored unknown key `seed`")),
+        "{err}"
+    );
+    let column = d.csv.lines().next().unwrap().len() + 2;
+    assert!(
+        err.contains(&format!(
+            "warning: {}:1:{column}: ignored column `u:spare`",
+            s(&data)
+        )),
+        "{err}"
+    );
+    let verdict: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("verdict.json")).unwrap()).unwrap();
+    assert_eq!(verdict["verdict"], "coulomb_friction");
+    assert_eq!(verdict["warnings"].as_array().unwrap().len(), 2);
+}
+
+#[test]
+fn gap_bench_on_a_folder_goes_past_unlabelled_and_bad_datasets() {
+    // A folder prepared by someone else: a subfolder, stem-named sidecars, a label naming a
+    // sensor effect without its channel and no ratio, a set without a label, one without a
+    // meta file and one too short to split. Every set is reported; none stops the bench.
+    let dir = scratch("bench-folder");
+    std::fs::create_dir_all(dir.join("sub")).unwrap();
+    let scale = one("dc_motor", "sensor_scale", 4.0);
+    let channel = scale.label.channel.clone().unwrap();
+    std::fs::write(dir.join("sub/scale.csv"), &scale.csv).unwrap();
+    std::fs::write(dir.join("sub/scale.meta.toml"), &scale.meta).unwrap();
+    std::fs::write(
+        dir.join("sub/scale.label.toml"),
+        format!("kind = \"single\"\neffects = [\"Sensor-Scale\"]\nchannel = \"{channel}\"\n"),
+    )
+    .unwrap();
+    let none = generated("dc_motor", &["brush_drop"], &[4.0], 7, 1)
+        .into_iter()
+        .find(|d| d.label.kind == CaseKind::None)
+        .unwrap();
+    std::fs::write(dir.join("unlabelled.csv"), &none.csv).unwrap();
+    std::fs::write(dir.join("unlabelled.csv.meta.toml"), &none.meta).unwrap();
+    std::fs::write(dir.join("no-meta.csv"), &none.csv).unwrap();
+    std::fs::write(dir.join("no-meta.csv.label.toml"), "kind = \"none\"\n").unwrap();
+    let short: String = none
+        .csv
+        .lines()
+        .take(100)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(dir.join("short.csv"), short).unwrap();
+    std::fs::write(dir.join("short.csv.meta.toml"), &none.meta).unwrap();
+    std::fs::write(dir.join("short.csv.label.toml"), "kind = \"none\"\n").unwrap();
+
+    let (outcomes, text) =
+        run_bench(&BenchOptions::default(), Some(&dir), None, Some(&dir)).unwrap();
+    let by_name = |n: &str| outcomes.iter().find(|o| o.name == n).unwrap();
+    assert_eq!(outcomes.len(), 4, "{text}");
+    let scale_outcome = by_name("sub/scale");
+    let expected = format!("sensor_scale:{}", channel.trim_start_matches("y:"));
+    assert_eq!(scale_outcome.label.effects, std::slice::from_ref(&expected));
+    assert_eq!(scale_outcome.verdict, expected, "{text}");
+    assert_eq!(by_name("unlabelled").label.kind, CaseKind::Unlabelled);
+    assert_eq!(by_name("unlabelled").verdict, "none", "{text}");
+    let no_meta = by_name("no-meta");
+    assert_eq!(no_meta.verdict, "error");
+    assert!(
+        no_meta
+            .error
+            .as_deref()
+            .unwrap()
+            .contains("missing meta file"),
+        "{text}"
+    );
+    assert!(
+        by_name("short")
+            .error
+            .as_deref()
+            .unwrap()
+            .contains("short.csv:100:1: too little data to split: 99 samples"),
+        "{text}"
+    );
+    // Both unreadable sets are `none` misses; the unlabelled one is not scored.
+    let sc = score(&outcomes, |_| true);
+    assert_eq!((sc.nones, sc.false_attribution), (2, 1.0));
+    assert!(
+        text.contains("(1 without a label, 2 not diagnosed)"),
+        "{text}"
+    );
+    assert!(
+        text.contains("Every labelled dataset (the labels give no"),
+        "{text}"
+    );
+    assert!(dir.join("bench.json").exists());
 }
 
 #[test]

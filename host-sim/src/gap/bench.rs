@@ -8,9 +8,12 @@
 //! noise-free measurement divided by the sensor noise std, on the channel it changes most
 //! (that channel is the localisation target); the magnitude that gives each ENR is found by
 //! bisection. The diagnoser sees only the CSV and a meta file with `plant` and `dt` (noise
-//! is estimated from the data). Datasets can also be read from a folder (`--datasets`): each
-//! `NAME.csv` with `NAME.csv.meta.toml` and a label `NAME.csv.label.toml` (`kind` = single |
-//! none | pair | unknown, `effects` = [...], `channel`, `ratio`) that only the bench reads.
+//! is estimated from the data). Datasets can also be read from a folder and its subfolders
+//! (`--datasets`): each `NAME.csv` with its meta file (`NAME.csv.meta.toml` or
+//! `NAME.meta.toml`) and a label (`NAME.csv.label.toml` or `NAME.label.toml`: `kind` =
+//! single | none | pair | unknown, `effects` = [...], `channel`, `ratio`) that only the bench
+//! reads. A dataset without a label is diagnosed and listed, not scored; one that cannot be
+//! read or diagnosed is listed with its error and counts as a miss of its kind.
 
 use crate::dataio::{Recording, TimeSeries, parse_recording};
 use crate::error::SimError;
@@ -41,6 +44,8 @@ pub enum CaseKind {
     Pair,
     /// An effect outside the catalogue.
     Unknown,
+    /// No label file: diagnosed and listed, not scored.
+    Unlabelled,
 }
 
 /// The label of one dataset (what the bench knows and the diagnoser does not).
@@ -55,9 +60,77 @@ pub struct Label {
     /// The channel the effect changes most (`y:<name>`).
     #[serde(default)]
     pub channel: Option<String>,
-    /// Effect-to-noise ratio (per effect for pairs).
-    #[serde(default)]
+    /// Effect-to-noise ratio (per effect for pairs); NaN when the label gives none.
+    #[serde(default = "unrated")]
     pub ratio: f64,
+}
+
+fn unrated() -> f64 {
+    f64::NAN
+}
+
+impl Label {
+    /// The label of a dataset that has none.
+    pub fn unlabelled() -> Self {
+        Label {
+            kind: CaseKind::Unlabelled,
+            effects: Vec::new(),
+            channel: None,
+            ratio: f64::NAN,
+        }
+    }
+
+    /// Checks the label and writes its effects as the diagnoser names them: a sensor
+    /// effect given without its channel (`sensor_bias` with `channel = "y:speed"`) or with
+    /// the column's prefix (`sensor_bias:y:speed`) becomes `sensor_bias:speed`, and the
+    /// spelling is folded (`Quantization`, `dead-zone`).
+    fn normalised(mut self) -> Result<Self, String> {
+        let needed = match self.kind {
+            CaseKind::Single => Some(1),
+            CaseKind::Pair => Some(2),
+            _ => None,
+        };
+        if let Some(k) = needed
+            && self.effects.len() != k
+        {
+            return Err(format!(
+                "a `{}` label needs {k} effect name(s) in `effects`, found {}",
+                serde_json::to_string(&self.kind)
+                    .unwrap_or_default()
+                    .trim_matches('"'),
+                self.effects.len()
+            ));
+        }
+        let channel = self
+            .channel
+            .as_deref()
+            .map(|c| c.strip_prefix("y:").unwrap_or(c).to_string());
+        if let Some(c) = &channel {
+            self.channel = Some(format!("y:{c}"));
+        }
+        if matches!(self.kind, CaseKind::Single | CaseKind::Pair) {
+            for e in &mut self.effects {
+                let folded = e.trim().to_lowercase().replace(['-', ' '], "_");
+                let (kind, on) = match folded.split_once(':') {
+                    Some((k, c)) => (
+                        k.to_string(),
+                        Some(c.strip_prefix("y:").unwrap_or(c).to_string()),
+                    ),
+                    None => (folded.clone(), None),
+                };
+                let kind = match kind.as_str() {
+                    "quantization" => "quantisation".to_string(),
+                    _ => kind,
+                };
+                let generic = GenericKind::from_name(&kind).is_some();
+                *e = match on.or_else(|| channel.clone().filter(|_| generic)) {
+                    Some(c) => format!("{kind}:{c}"),
+                    None => kind,
+                };
+            }
+        }
+        Ok(self)
+    }
 }
 
 /// One dataset to diagnose.
@@ -71,6 +144,10 @@ pub struct Dataset {
     pub meta: String,
     /// Label.
     pub label: Label,
+    /// Folder the files were read from (`None`: generated).
+    pub folder: Option<PathBuf>,
+    /// Why the dataset's files could not be read (then it is not diagnosed).
+    pub error: Option<String>,
 }
 
 /// One diagnosis of a dataset.
@@ -96,6 +173,9 @@ pub struct Outcome {
     pub sigma: Vec<f64>,
     /// Per channel: training RSS, count, held-out RSS, count of the user's model.
     pub nominal_rss: Vec<[f64; 4]>,
+    /// Why the dataset could not be read or diagnosed (its verdict is then `error`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
 }
 
 /// One fitted candidate as `bench.json` records it.
@@ -118,6 +198,7 @@ impl Outcome {
             CaseKind::Pair => same_set(&self.verdict, &self.label.effects),
             CaseKind::None => self.verdict == "none",
             CaseKind::Unknown => self.verdict == "unknown",
+            CaseKind::Unlabelled => false,
         }
     }
     fn top3_hit(&self) -> bool {
@@ -1171,6 +1252,8 @@ fn dataset(bp: &dyn BenchPlant, name: String, seed: u64, spec: &Spec, label: Lab
         csv: to_csv(bp, &clean, &measured),
         meta: meta_text(bp, seed),
         label,
+        folder: None,
+        error: None,
     }
 }
 
@@ -1366,8 +1449,15 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
 
 /// Diagnoses one dataset from its texts alone.
 pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
-    let csv_path = PathBuf::from(format!("{}.csv", d.name));
-    let meta_path = PathBuf::from(format!("{}.csv.meta.toml", d.name));
+    if let Some(e) = &d.error {
+        return Err(SimError::Run(e.clone()));
+    }
+    let folder = d.folder.clone().unwrap_or_default();
+    let csv_path = folder.join(format!("{}.csv", d.name));
+    let meta_path = match &d.folder {
+        Some(_) => crate::gap::meta::find_gap_meta(&csv_path),
+        None => folder.join(format!("{}.csv.meta.toml", d.name)),
+    };
     let recording: Recording = parse_recording(&csv_path, &d.csv)?;
     let meta = parse_gap_meta(&meta_path, &d.meta)?;
     let diag = diagnose_recording(&csv_path, &recording, &meta)?;
@@ -1403,44 +1493,127 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
             .collect(),
         sigma: diag.noise.iter().map(|n| n.std).collect(),
         nominal_rss: diag.nominal_rss.clone(),
+        error: None,
     })
 }
 
-/// Reads labelled datasets from a folder (see the module docs).
-pub fn read_datasets(dir: &Path) -> Result<Vec<Dataset>, SimError> {
-    let mut out = Vec::new();
+/// [`run_one`], with an error recorded as the outcome (verdict `error`) instead of returned.
+pub fn outcome(d: &Dataset) -> Outcome {
+    run_one(d).unwrap_or_else(|e| Outcome {
+        name: d.name.clone(),
+        label: d.label.clone(),
+        verdict: "error".into(),
+        top3: Vec::new(),
+        channel: String::new(),
+        shrink: 0.0,
+        confusable: Vec::new(),
+        candidates: Vec::new(),
+        sigma: Vec::new(),
+        nominal_rss: Vec::new(),
+        error: Some(e.to_string()),
+    })
+}
+
+/// Every `*.csv` under `dir`, subfolders included, sorted.
+fn csv_files(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), SimError> {
     let entries = std::fs::read_dir(dir).map_err(|e| SimError::Unreadable {
         path: dir.to_path_buf(),
         message: e.to_string(),
     })?;
-    let mut paths: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
-        .collect();
+    let mut paths: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
     paths.sort();
-    for csv in paths {
-        let name = csv
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let read = |suffix: &str| -> Result<String, SimError> {
-            let mut p = csv.clone().into_os_string();
-            p.push(suffix);
-            crate::error::read_input(Path::new(&p))
+    for p in paths {
+        if p.is_dir() {
+            csv_files(&p, out)?;
+        } else if p.extension().is_some_and(|x| x == "csv") {
+            out.push(p);
+        }
+    }
+    Ok(())
+}
+
+/// The first of `NAME.csv<suffix>` and `NAME<suffix>` that exists.
+fn sidecar(csv: &Path, suffix: &str) -> Option<PathBuf> {
+    let mut beside = csv.as_os_str().to_owned();
+    beside.push(suffix);
+    let stem = csv.with_extension(suffix.trim_start_matches('.'));
+    [PathBuf::from(beside), stem]
+        .into_iter()
+        .find(|p| p.exists())
+}
+
+/// Reads one dataset; a file that cannot be read becomes the dataset's `error`.
+fn read_dataset(root: &Path, csv: &Path) -> Dataset {
+    // The path below the folder names the dataset, so that subfolders stay apart.
+    let (folder, name) = match csv.strip_prefix(root) {
+        Ok(relative) => (
+            root.to_path_buf(),
+            relative.with_extension("").to_string_lossy().into_owned(),
+        ),
+        Err(_) => (
+            csv.parent().map(Path::to_path_buf).unwrap_or_default(),
+            csv.file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        ),
+    };
+    let mut d = Dataset {
+        name,
+        csv: String::new(),
+        meta: String::new(),
+        label: Label::unlabelled(),
+        folder: Some(folder),
+        error: None,
+    };
+    let read = || -> Result<(String, String, Label), SimError> {
+        let label = match sidecar(csv, ".label.toml") {
+            Some(path) => {
+                let text = crate::error::read_input(&path)?;
+                let label: Label = toml::from_str(&text)
+                    .map_err(|e| crate::dataio::toml_error(&path, &text, &e))?;
+                label
+                    .normalised()
+                    .map_err(|m| SimError::at_offset(&path, &text, 0, m))?
+            }
+            None => Label::unlabelled(),
         };
-        let label_text = read(".label.toml")?;
-        let mut label_path = csv.clone().into_os_string();
-        label_path.push(".label.toml");
-        let label: Label = toml::from_str(&label_text)
-            .map_err(|e| crate::dataio::toml_error(Path::new(&label_path), &label_text, &e))?;
-        out.push(Dataset {
-            name,
-            csv: crate::error::read_input(&csv)?,
-            meta: read(".meta.toml")?,
-            label,
+        let csv_text = crate::error::read_input(csv)?;
+        let meta = crate::gap::meta::read_gap_meta(csv, None)?;
+        Ok((csv_text, meta.text, label))
+    };
+    match read() {
+        Ok((csv_text, meta, label)) => {
+            d.csv = csv_text;
+            d.meta = meta;
+            d.label = label;
+        }
+        Err(e) => {
+            // The label, when it reads, still says what kind of miss this is.
+            if let Some(path) = sidecar(csv, ".label.toml")
+                && let Ok(text) = std::fs::read_to_string(&path)
+                && let Ok(label) = toml::from_str::<Label>(&text)
+                && let Ok(label) = label.normalised()
+            {
+                d.label = label;
+            }
+            d.error = Some(e.to_string());
+        }
+    }
+    d
+}
+
+/// Reads the datasets under a folder (see the module docs). Fails only when the folder
+/// cannot be listed or holds no CSV file; a bad dataset is kept with its error.
+pub fn read_datasets(dir: &Path) -> Result<Vec<Dataset>, SimError> {
+    let mut paths = Vec::new();
+    csv_files(dir, &mut paths)?;
+    if paths.is_empty() {
+        return Err(SimError::Unreadable {
+            path: dir.to_path_buf(),
+            message: "no `*.csv` dataset in this folder or its subfolders".into(),
         });
     }
-    Ok(out)
+    Ok(paths.iter().map(|p| read_dataset(dir, p)).collect())
 }
 
 /// Writes datasets to a folder in the format [`read_datasets`] reads.
@@ -1526,7 +1699,15 @@ pub fn score(outcomes: &[Outcome], keep: impl Fn(f64) -> bool) -> Scores {
                 .sum::<f64>()
                 / singles.len() as f64
         },
-        localisation: frac(&singles, Outcome::localised),
+        // A label without a channel does not score localisation.
+        localisation: frac(
+            &singles
+                .iter()
+                .copied()
+                .filter(|o| o.label.channel.is_some())
+                .collect::<Vec<_>>(),
+            Outcome::localised,
+        ),
         median_shrink: crate::gap::stats::median(&shrinks).unwrap_or(f64::NAN),
         nones: nones.len(),
         false_attribution: frac(&nones, |o| o.verdict != "none"),
@@ -1534,6 +1715,14 @@ pub fn score(outcomes: &[Outcome], keep: impl Fn(f64) -> bool) -> Scores {
         unknown_recall: frac(&unknowns, |o| o.verdict == "unknown"),
         pairs: pairs.len(),
         pair_in_top3: frac(&pairs, Outcome::pair_in_top3),
+    }
+}
+
+fn fixed3(v: f64) -> String {
+    if v.is_nan() {
+        "-".into()
+    } else {
+        format!("{v:.3}")
     }
 }
 
@@ -1548,10 +1737,25 @@ fn pct(v: f64) -> String {
 /// The printed summary: overall at ratio >= 2 against the targets, per ratio, per effect.
 pub fn summary(outcomes: &[Outcome]) -> String {
     let mut s = String::new();
-    let at2 = score(outcomes, |r| r >= 2.0);
+    // Labels written without a ratio cannot be split by it: then every set counts.
+    let rated = outcomes
+        .iter()
+        .any(|o| o.label.kind != CaseKind::None && o.label.ratio.is_finite());
+    let headline = |r: f64| if rated { r >= 2.0 } else { true };
+    let at2 = score(outcomes, headline);
+    let unlabelled = outcomes
+        .iter()
+        .filter(|o| o.label.kind == CaseKind::Unlabelled)
+        .count();
+    let failed = outcomes.iter().filter(|o| o.error.is_some()).count();
     s.push_str(&format!(
-        "gap-bench: {} datasets\n\nAt effect-to-noise ratio >= 2 (targets in brackets):\n",
-        outcomes.len()
+        "gap-bench: {} datasets ({unlabelled} without a label, {failed} not diagnosed)\n\n{}\n",
+        outcomes.len(),
+        if rated {
+            "At effect-to-noise ratio >= 2 (targets in brackets):"
+        } else {
+            "Every labelled dataset (the labels give no effect-to-noise ratio):"
+        }
     ));
     let rows = vec![
         vec![
@@ -1595,7 +1799,7 @@ pub fn summary(outcomes: &[Outcome]) -> String {
         ],
         vec![
             "median held-out shrink".into(),
-            format!("{:.3}", at2.median_shrink),
+            fixed3(at2.median_shrink),
             ">= 0.8".into(),
             at2.singles.to_string(),
         ],
@@ -1616,19 +1820,23 @@ pub fn summary(outcomes: &[Outcome]) -> String {
         .map(|o| o.label.ratio)
         .collect();
     ratios.sort_by(f64::total_cmp);
-    ratios.dedup();
+    ratios.dedup_by(|a, b| a == b || (a.is_nan() && b.is_nan()));
     s.push_str("\nSingle effects per effect-to-noise ratio:\n");
     let rows: Vec<Vec<String>> = ratios
         .iter()
         .map(|&r| {
-            let sc = score(outcomes, |x| x == r);
+            let sc = score(outcomes, |x| x == r || (x.is_nan() && r.is_nan()));
             vec![
-                format!("{r}"),
+                if r.is_nan() {
+                    "unrated".into()
+                } else {
+                    format!("{r}")
+                },
                 sc.singles.to_string(),
                 pct(sc.top1),
                 pct(sc.top3),
                 pct(sc.localisation),
-                format!("{:.3}", sc.median_shrink),
+                fixed3(sc.median_shrink),
                 pct(sc.unknown_recall),
                 pct(sc.pair_in_top3),
             ]
@@ -1654,7 +1862,10 @@ pub fn summary(outcomes: &[Outcome]) -> String {
         .collect();
     effects.sort();
     effects.dedup();
-    s.push_str("\nPer effect, ratio >= 2 (generic effects over both channels):\n");
+    s.push_str(&format!(
+        "\nPer effect{} (generic effects over every channel):\n",
+        if rated { ", ratio >= 2" } else { "" }
+    ));
     let rows: Vec<Vec<String>> = effects
         .iter()
         .map(|e| {
@@ -1665,7 +1876,7 @@ pub fn summary(outcomes: &[Outcome]) -> String {
                 })
                 .cloned()
                 .collect();
-            let sc = score(&sub, |r| r >= 2.0);
+            let sc = score(&sub, headline);
             let lo = score(&sub, |r| r < 2.0);
             vec![
                 e.clone(),
@@ -1673,7 +1884,7 @@ pub fn summary(outcomes: &[Outcome]) -> String {
                 pct(sc.top1),
                 pct(sc.top3),
                 pct(sc.localisation),
-                format!("{:.3}", sc.median_shrink),
+                fixed3(sc.median_shrink),
                 pct(lo.top1),
             ]
         })
@@ -1693,11 +1904,17 @@ pub fn summary(outcomes: &[Outcome]) -> String {
     let misses: Vec<&Outcome> = outcomes
         .iter()
         .filter(|o| {
-            o.label.ratio >= 2.0 && !o.top1() || (o.label.kind == CaseKind::None && !o.top1())
+            o.label.kind != CaseKind::Unlabelled
+                && o.error.is_none()
+                && !o.top1()
+                && (o.label.kind == CaseKind::None || headline(o.label.ratio))
         })
         .collect();
     if !misses.is_empty() {
-        s.push_str("\nMisses at ratio >= 2 (dataset: verdict; top 3):\n");
+        s.push_str(&format!(
+            "\nMisses{} (dataset: verdict; top 3):\n",
+            if rated { " at ratio >= 2" } else { "" }
+        ));
         for o in misses {
             let confusable = if o.confusable.is_empty() {
                 String::new()
@@ -1712,6 +1929,31 @@ pub fn summary(outcomes: &[Outcome]) -> String {
             ));
         }
     }
+    let listed = |s: &mut String, title: &str, rows: Vec<String>| {
+        if !rows.is_empty() {
+            s.push_str(&format!("\n{title}:\n"));
+            for r in rows {
+                s.push_str(&format!("  {r}\n"));
+            }
+        }
+    };
+    listed(
+        &mut s,
+        "Not diagnosed (each a miss of its label's kind)",
+        outcomes
+            .iter()
+            .filter_map(|o| Some(format!("{}: {}", o.name, o.error.as_ref()?)))
+            .collect(),
+    );
+    listed(
+        &mut s,
+        "Without a label (dataset: verdict; top 3)",
+        outcomes
+            .iter()
+            .filter(|o| o.label.kind == CaseKind::Unlabelled && o.error.is_none())
+            .map(|o| format!("{}: {}; {}", o.name, o.verdict, o.top3.join(", ")))
+            .collect(),
+    );
     s
 }
 
@@ -1739,7 +1981,7 @@ pub fn run_bench(
     if let Some(w) = write {
         write_datasets(w, &datasets)?;
     }
-    let outcomes: Vec<Outcome> = datasets.par_iter().map(run_one).collect::<Result<_, _>>()?;
+    let outcomes: Vec<Outcome> = datasets.par_iter().map(outcome).collect();
     let text = summary(&outcomes);
     if let Some(o) = out {
         write_json(&o.join("bench.json"), &outcomes)?;
@@ -1789,6 +2031,26 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn labels_from_elsewhere_name_effects_as_the_diagnoser_does() {
+        let read = |text: &str| toml::from_str::<Label>(text).unwrap().normalised();
+        let l = read("kind = \"single\"\neffects = [\"Dead-Zone\"]\nchannel = \"speed\"").unwrap();
+        assert_eq!(l.effects, ["dead_zone:speed"]);
+        assert_eq!(l.channel.as_deref(), Some("y:speed"));
+        assert!(l.ratio.is_nan());
+        let l = read("kind = \"pair\"\neffects = [\"quantization:y:pb\", \"choked_flow\"]\nchannel = \"y:pt\"\nratio = 4").unwrap();
+        assert_eq!(l.effects, ["quantisation:pb", "choked_flow"]);
+        assert_eq!(l.ratio, 4.0);
+        let e = read("kind = \"pair\"\neffects = [\"cogging\"]").unwrap_err();
+        assert!(e.contains("a `pair` label needs 2 effect name(s)"), "{e}");
+        assert_eq!(
+            read("kind = \"unknown\"\neffects = [\"Warp\"]")
+                .unwrap()
+                .effects,
+            ["Warp"]
+        );
     }
 
     #[test]

@@ -114,6 +114,8 @@ pub struct Diagnosis {
     /// Per channel: training RSS, count, held-out RSS, count of the user's model.
     #[serde(skip)]
     pub nominal_rss: Vec<[f64; 4]>,
+    /// What was read but ignored (unknown meta keys, columns the plant does not use).
+    pub warnings: Vec<String>,
 }
 
 /// Reads `data` and its meta file (beside it, or `meta`) and diagnoses.
@@ -256,23 +258,26 @@ pub fn diagnose_with(
             ),
         });
     }
-    let mut data = plant_data(recording, meta.dt);
-    data.initial_window = plant.initial_window();
+    let t = recording.series.column("t").unwrap_or_default();
     let measured_dt =
-        crate::gap::stats::median(&data.t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
-            .unwrap_or(meta.dt);
-    if (measured_dt - meta.dt).abs() > 0.1 * meta.dt {
+        crate::gap::stats::median(&t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
+            .unwrap_or(f64::NAN);
+    let dt = meta.dt.unwrap_or(measured_dt);
+    if (measured_dt - dt).abs() > 0.1 * dt {
         return Err(SimError::BadInput {
             path: meta.path.clone(),
             line: 1,
             column: 1,
             message: format!(
-                "`dt` = {} but the samples of {} are {measured_dt} s apart",
-                meta.dt,
+                "`dt` = {dt} but the samples of {} are {measured_dt} s apart",
                 csv_path.display()
             ),
         });
     }
+    let mut warnings = meta.warnings.clone();
+    warnings.extend(unused_columns(plant, recording, csv_path));
+    let mut data = plant_data(recording, dt);
+    data.initial_window = plant.initial_window();
     let train: Vec<bool> = (0..n).map(|k| (k * BLOCKS / n).is_multiple_of(2)).collect();
     let test: Vec<bool> = train.iter().map(|b| !b).collect();
     let mut sigma = Vec::new();
@@ -445,7 +450,52 @@ pub fn diagnose_with(
         spectrum: report.spectrum.clone(),
         overlays,
         nominal_rss: problem.rss_split(&problem.nominal),
+        warnings,
     })
+}
+
+/// `u:` and `y:` columns the plant does not read, as warnings (a misspelt optional input
+/// would otherwise be silently replaced by its default).
+fn unused_columns(plant: &dyn GapPlant, recording: &Recording, csv_path: &Path) -> Vec<String> {
+    let inputs: Vec<&str> = plant
+        .required_inputs()
+        .into_iter()
+        .chain(plant.optional_inputs().into_iter().map(|(name, _)| name))
+        .collect();
+    let outputs = plant.outputs();
+    let unread_inputs = recording
+        .inputs
+        .iter()
+        .filter(|u| !inputs.contains(&u.as_str()))
+        .map(|u| format!("u:{u}"));
+    let unread_outputs = recording
+        .measurements
+        .iter()
+        .filter(|y| !outputs.contains(&y.as_str()))
+        .map(|y| format!("y:{y}"));
+    // Column of a header cell, counting the cells and commas before it.
+    let column = |name: &str| -> usize {
+        let header = &recording.series.header;
+        let i = header.iter().position(|h| h == name).unwrap_or(0);
+        1 + header[..i].iter().map(|h| h.len() + 1).sum::<usize>()
+    };
+    unread_inputs
+        .chain(unread_outputs)
+        .map(|c| {
+            format!(
+                "{}:1:{}: ignored column `{c}`: plant `{}` reads {}",
+                csv_path.display(),
+                column(&c),
+                plant.name(),
+                inputs
+                    .iter()
+                    .map(|u| format!("u:{u}"))
+                    .chain(outputs.iter().map(|y| format!("y:{y}")))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+        .collect()
 }
 
 /// The step of the lattice `y` lies on ([`crate::gap::effects::lattice_step`]) when over

@@ -2,7 +2,7 @@
 //!
 //! ```toml
 //! plant = "reaction_wheel"        # a built-in gap plant (see `gap::plant::builtin_plant`)
-//! dt = 0.05                       # nominal sample time (s)
+//! dt = 0.05                       # nominal sample time (s); without it, the data's median step
 //! sim_effects = ["driver_lowpass"] # catalogue effects the user's model already includes
 //! description = "free text"
 //! [units]                          # per column, e.g. "y:speed" = "rad/s"
@@ -10,6 +10,9 @@
 //! [noise]                          # optional sensor noise std per channel, e.g. "y:speed" = 3e-3
 //! ```
 //! Every entry keeps its byte offset so that a bad name is reported at its line and column.
+//! An unknown top-level key is not an error (a preparer's own notes, say `seed`): it is
+//! ignored with a warning at its line and column. Unknown names *inside* `[model]` and
+//! `sim_effects` are errors, since they would change the diagnosis.
 
 use crate::dataio::{meta_path, toml_error};
 use crate::error::{SimError, read_input};
@@ -35,8 +38,8 @@ pub struct GapMeta {
     pub text: String,
     /// Plant name.
     pub plant: Located<String>,
-    /// Sample time (s).
-    pub dt: f64,
+    /// Sample time (s); `None` takes the median step of the data's `t`.
+    pub dt: Option<f64>,
     /// Units per column name.
     pub units: BTreeMap<String, Located<String>>,
     /// Model parameter values.
@@ -47,6 +50,8 @@ pub struct GapMeta {
     pub noise: BTreeMap<String, Located<f64>>,
     /// Free text.
     pub description: Option<String>,
+    /// Ignored entries, each as `file:line:column: message`.
+    pub warnings: Vec<String>,
 }
 
 impl GapMeta {
@@ -65,15 +70,51 @@ fn key_offset(text: &str, offset: usize) -> usize {
     line_start + (line.len() - line.trim_start().len())
 }
 
-/// Reads the meta file at `meta` or, when `None`, beside `data` (`<data>.meta.toml`).
+/// Where the top-level key or table `key` is written (0 when not found: a quoted or
+/// dotted spelling).
+fn top_level_key_offset(text: &str, key: &str) -> usize {
+    let mut offset = 0;
+    for line in text.split_inclusive('\n') {
+        let indent = line.len() - line.trim_start().len();
+        let body = line.trim_start();
+        let named = body
+            .strip_prefix('[')
+            .map_or(body, |b| b.trim_start_matches('['))
+            .trim_start();
+        if let Some(rest) = named.strip_prefix(key)
+            && rest.trim_start().starts_with(['=', ']', '.'])
+        {
+            return offset + indent;
+        }
+        offset += line.len();
+    }
+    0
+}
+
+/// The meta file of `data` when none is given: `<data>.meta.toml` (`run.csv.meta.toml`)
+/// or, when that does not exist, `<stem>.meta.toml` (`run.meta.toml`).
+pub fn find_gap_meta(data: &Path) -> PathBuf {
+    let beside = meta_path(data);
+    if beside.exists() {
+        return beside;
+    }
+    let stem = data.with_extension("meta.toml");
+    if stem.exists() { stem } else { beside }
+}
+
+/// Reads the meta file at `meta` or, when `None`, beside `data` ([`find_gap_meta`]).
 pub fn read_gap_meta(data: &Path, meta: Option<&Path>) -> Result<GapMeta, SimError> {
-    let path = meta.map_or_else(|| meta_path(data), Path::to_path_buf);
+    let path = meta.map_or_else(|| find_gap_meta(data), Path::to_path_buf);
     if !path.exists() {
+        let also = match meta {
+            Some(_) => String::new(),
+            None => format!(" (or `{}`)", data.with_extension("meta.toml").display()),
+        };
         return Err(SimError::Unreadable {
             path: path.clone(),
             message: format!(
-                "missing meta file: `prognos gap` needs `{}` (plant, dt, [model]) beside the \
-                 data, or --meta FILE",
+                "missing meta file: `prognos gap` needs `{}`{also} (plant, dt, [model]) \
+                 beside the data, or --meta FILE",
                 path.display()
             ),
         });
@@ -85,10 +126,10 @@ pub fn read_gap_meta(data: &Path, meta: Option<&Path>) -> Result<GapMeta, SimErr
 /// Parses meta text; `path` is used in error messages.
 pub fn parse_gap_meta(path: &Path, text: &str) -> Result<GapMeta, SimError> {
     #[derive(Deserialize)]
-    #[serde(deny_unknown_fields)]
     struct Raw {
         plant: toml::Spanned<String>,
-        dt: toml::Spanned<f64>,
+        #[serde(default)]
+        dt: Option<toml::Spanned<f64>>,
         #[serde(default)]
         units: BTreeMap<String, toml::Spanned<String>>,
         #[serde(default)]
@@ -99,16 +140,38 @@ pub fn parse_gap_meta(path: &Path, text: &str) -> Result<GapMeta, SimError> {
         noise: BTreeMap<String, toml::Spanned<f64>>,
         #[serde(default)]
         description: Option<String>,
+        #[serde(flatten)]
+        unknown: BTreeMap<String, toml::Value>,
     }
     let raw: Raw = toml::from_str(text).map_err(|e| toml_error(path, text, &e))?;
     let at = |offset: usize, message: String| SimError::at_offset(path, text, offset, message);
-    let dt = *raw.dt.get_ref();
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(at(
-            raw.dt.span().start,
-            format!("`dt` must be a positive number, found {dt}"),
-        ));
-    }
+    let dt = match &raw.dt {
+        Some(d) => {
+            let dt = *d.get_ref();
+            if !(dt.is_finite() && dt > 0.0) {
+                return Err(at(
+                    d.span().start,
+                    format!("`dt` must be a positive number, found {dt}"),
+                ));
+            }
+            Some(dt)
+        }
+        None => None,
+    };
+    let warnings = raw
+        .unknown
+        .keys()
+        .map(|k| {
+            at(
+                top_level_key_offset(text, k),
+                format!(
+                    "ignored unknown key `{k}` (read: plant, dt, sim_effects, description, \
+                     [units], [model], [noise])"
+                ),
+            )
+            .to_string()
+        })
+        .collect();
     let keyed = |m: BTreeMap<String, toml::Spanned<f64>>,
                  what: &str|
      -> Result<BTreeMap<String, Located<f64>>, SimError> {
@@ -163,6 +226,7 @@ pub fn parse_gap_meta(path: &Path, text: &str) -> Result<GapMeta, SimError> {
             .collect(),
         noise,
         description: raw.description,
+        warnings,
     })
 }
 
@@ -177,6 +241,20 @@ mod tests {
         let e = m.error_at(m.model["resistance"].offset, "x");
         assert_eq!(e.to_string(), "m.toml:4:3: x");
         assert_eq!(m.model["resistance"].value, 2.5);
+    }
+
+    #[test]
+    fn an_unknown_top_level_key_is_a_warning_at_its_line_and_dt_may_be_left_out() {
+        let text = "plant = \"dc_motor\"\nseed = 3\n[truth]\neffect = \"x\"\n";
+        let m = parse_gap_meta(Path::new("m.toml"), text).unwrap();
+        assert_eq!(m.dt, None);
+        assert_eq!(m.warnings.len(), 2, "{:?}", m.warnings);
+        assert!(
+            m.warnings[0].starts_with("m.toml:2:1: ignored unknown key `seed`"),
+            "{:?}",
+            m.warnings
+        );
+        assert!(m.warnings[1].starts_with("m.toml:3:"), "{:?}", m.warnings);
     }
 
     #[test]

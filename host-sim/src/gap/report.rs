@@ -71,6 +71,7 @@ fn summary_lines(d: &Diagnosis) -> Vec<String> {
             .collect::<Vec<_>>()
             .join(", ")
     ));
+    out.extend(d.warnings.iter().map(|w| format!("warning: {w}")));
     out
 }
 
