@@ -163,6 +163,7 @@ pub fn simulate_motor(
     Ok(Simulation {
         outputs: vec![out_i, out_w],
         states,
+        variances: Vec::new(),
     })
 }
 

@@ -644,6 +644,10 @@ fn select_outputs(sim: &Simulation, select: &[usize]) -> Simulation {
     Simulation {
         outputs: select.iter().map(|&i| sim.outputs[i].clone()).collect(),
         states: sim.states.clone(),
+        variances: select
+            .iter()
+            .map(|&i| sim.variances.get(i).cloned().flatten())
+            .collect(),
     }
 }
 
@@ -691,6 +695,7 @@ impl GapPlant for SelectPlant<'_> {
         let mut full = Simulation {
             outputs: vec![vec![0.0; data.len()]; all.len()],
             states: nominal.states.clone(),
+            variances: Vec::new(),
         };
         for (j, &i) in self.select.iter().enumerate() {
             full.outputs[i] = nominal.outputs[j].clone();

@@ -22,6 +22,11 @@ use serde::Serialize;
 pub type QuantiserReplay = ((f64, f64), Vec<f64>);
 
 /// `ln N(r; 0, variance)`.
+/// The spread a replay adds to channel `c`'s readings, if any ([`Simulation::variances`]).
+fn added_variance(sim: &Simulation, c: usize) -> Option<&Vec<f64>> {
+    sim.variances.get(c).and_then(Option::as_ref)
+}
+
 fn gaussian_log_density(r: f64, variance: f64) -> f64 {
     -0.5 * (std::f64::consts::TAU * variance).ln() - 0.5 * r * r / variance
 }
@@ -491,6 +496,7 @@ impl<'a> Problem<'a> {
         Simulation {
             outputs: self.apply_generic(outputs, &quantisers),
             states: raw.states,
+            variances: raw.variances,
         }
     }
 
@@ -582,8 +588,11 @@ impl<'a> Problem<'a> {
     pub fn gap_of(&self, sim: &Simulation, quantisers: &[Option<QuantiserReplay>]) -> f64 {
         let mut total = 0.0;
         for (c, (y, m)) in self.measured.iter().zip(&sim.outputs).enumerate() {
-            let s2 = self.sigma[c] * self.sigma[c];
+            let s2 = self
+                .noise_beside_spread(sim, c)
+                .unwrap_or(self.sigma[c] * self.sigma[c]);
             let quantiser = quantisers.get(c).and_then(Option::as_ref);
+            let added = added_variance(sim, c);
             let (mut acc, mut n) = (0.0, 0usize);
             for k in 0..y.len() {
                 if !(self.test[k] && y[k].is_finite()) {
@@ -592,7 +601,7 @@ impl<'a> Problem<'a> {
                 let var = match quantiser {
                     Some(((q, s), input)) => s2.max(quantised_variance(input[k], *q, *s)),
                     None => s2,
-                };
+                } + added.map_or(0.0, |a| a[k]);
                 let r = y[k] - m[k];
                 acc += if r.is_finite() {
                     r * r / var
@@ -621,8 +630,11 @@ impl<'a> Problem<'a> {
         }
         let mut p = Vec::new();
         for (c, (y, m)) in self.measured.iter().zip(&sim.outputs).enumerate() {
-            let s2 = self.sigma[c] * self.sigma[c];
+            let s2 = self
+                .noise_beside_spread(sim, c)
+                .unwrap_or(self.sigma[c] * self.sigma[c]);
             let quantiser = quantisers.get(c).and_then(Option::as_ref);
+            let added = added_variance(sim, c);
             for &(a, b) in &blocks {
                 let (mut acc, mut n) = (0.0, 0usize);
                 for k in a..b {
@@ -633,7 +645,7 @@ impl<'a> Problem<'a> {
                     let var = match quantiser {
                         Some(((q, s), input)) => s2.max(quantised_variance(input[k], *q, *s)),
                         None => s2,
-                    };
+                    } + added.map_or(0.0, |a| a[k]);
                     acc += r * r / var;
                     n += 1;
                 }
@@ -740,6 +752,50 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// The sensor noise variance beside the spread a replay adds to channel `c`
+    /// ([`Simulation::variances`]), by maximum likelihood on the training samples and at
+    /// most the channel's noise estimate: that estimate, taken from the readings, already
+    /// holds the spread's average (`None` without a spread).
+    fn noise_beside_spread(&self, sim: &Simulation, c: usize) -> Option<f64> {
+        let added = added_variance(sim, c)?;
+        let (y, m) = (&self.measured[c], &sim.outputs[c]);
+        let terms: Vec<(f64, f64)> = (0..y.len())
+            .filter(|&k| self.train[k])
+            .map(|k| ((y[k] - m[k]).powi(2), added[k]))
+            .filter(|(r2, a)| r2.is_finite() && a.is_finite())
+            .collect();
+        let s2 = self.sigma[c] * self.sigma[c];
+        let cost = |ln_v: f64| -> f64 {
+            let v = ln_v.exp();
+            terms
+                .iter()
+                .map(|(r2, a)| (v + a).ln() + r2 / (v + a))
+                .sum()
+        };
+        // Golden section on the log variance between 1e-4 and 1 times the estimate.
+        let (mut lo, mut hi) = ((1e-4 * s2).ln(), s2.ln());
+        let g = 0.5 * (5f64.sqrt() - 1.0);
+        let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+        let (mut f1, mut f2) = (cost(x1), cost(x2));
+        for _ in 0..40 {
+            if f1 <= f2 {
+                (hi, x2, f2) = (x2, x1, f1);
+                x1 = hi - g * (hi - lo);
+                f1 = cost(x1);
+            } else {
+                (lo, x1, f1) = (x1, x2, f2);
+                x2 = lo + g * (hi - lo);
+                f2 = cost(x2);
+            }
+        }
+        let best = if cost(s2.ln()) < f1.min(f2) {
+            s2.ln()
+        } else {
+            0.5 * (x1 + x2)
+        };
+        Some(best.exp())
+    }
+
     /// Per channel, the quantiser among `fitted` on it, if any (see [`QuantiserReplay`]).
     pub fn quantisers(&self, fitted: &[(Component, Vec<f64>)]) -> Vec<Option<QuantiserReplay>> {
         (0..self.measured.len())
@@ -768,23 +824,28 @@ impl<'a> Problem<'a> {
     /// between thresholds the reading is certain, on one it is a coin flip between two
     /// steps, so one variance for the channel misjudges both (`None` without a quantiser).
     /// `quantisers` is [`Problem::quantisers`] of the candidate's components.
+    /// A replay that adds a spread of its own ([`Simulation::variances`]) adds it to the
+    /// sensor noise's variance on its channel.
     pub fn predicted_variances(
         &self,
         quantisers: &[Option<QuantiserReplay>],
+        sim: &Simulation,
     ) -> Vec<Option<Vec<f64>>> {
-        quantisers
-            .iter()
-            .enumerate()
-            .map(|(c, quantiser)| {
-                let ((q, s), input) = quantiser.as_ref()?;
-                let (q, s) = (*q, *s);
-                let floor = 0.5 * self.sigma[c] * self.sigma[c];
-                Some(
-                    input
+        (0..self.measured.len())
+            .map(|c| {
+                let s2 = self.sigma[c] * self.sigma[c];
+                let added = added_variance(sim, c);
+                let base: Vec<f64> = match quantisers.get(c).and_then(Option::as_ref) {
+                    Some(((q, s), input)) => input
                         .iter()
-                        .map(|v| quantised_variance(*v, q, s).max(floor))
+                        .map(|v| quantised_variance(*v, *q, *s).max(0.5 * s2))
                         .collect(),
-                )
+                    None => vec![self.noise_beside_spread(sim, c)?; added?.len()],
+                };
+                Some(match added {
+                    Some(a) => base.iter().zip(a).map(|(b, a)| b + a).collect(),
+                    None => base,
+                })
             })
             .collect()
     }
@@ -821,7 +882,8 @@ impl<'a> Problem<'a> {
         let quantised = components
             .iter()
             .any(|c| matches!(c, Component::Generic(GenericKind::Quantisation, _)));
-        let c = if quantised {
+        let spread = sim.variances.iter().any(Option::is_some);
+        let c = if quantised || spread {
             self.quantised_train_cost(&sim, &fitted)
         } else {
             self.train_cost(&sim)
@@ -834,7 +896,7 @@ impl<'a> Problem<'a> {
     /// squared error alone, a quantiser whose mean misses a few steps is fitted with a
     /// noise that smooths its mean, which the likelihood then rejects.
     fn quantised_train_cost(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> f64 {
-        let predicted = self.predicted_variances(&self.quantisers(fitted));
+        let predicted = self.predicted_variances(&self.quantisers(fitted), sim);
         let train = self.channel_rss(sim, &self.train);
         let mut cost = 0.0;
         for (c, ((rss, _), s)) in train.iter().zip(&self.sigma).enumerate() {
@@ -908,9 +970,11 @@ impl<'a> Problem<'a> {
         // One replay without each quantiser, shared by the gap and the score.
         let quantisers = self.quantisers(&fitted);
         let after = self.gap_of(&sim, &quantisers);
-        let predicted = self.predicted_variances(&quantisers);
+        let predicted = self.predicted_variances(&quantisers, &sim);
         let nominal_score = self.held_out_score(&self.nominal, 0, &[]);
-        let absolute = self.held_out_score(&sim, dims.len(), &predicted);
+        // A spread's noise level is fitted too (see `noise_beside_spread`).
+        let spread = sim.variances.iter().filter(|v| v.is_some()).count();
+        let absolute = self.held_out_score(&sim, dims.len() + spread, &predicted);
         let names: Vec<String> = components.iter().map(|c| self.component_name(c)).collect();
         Some(Evaluation {
             effect: names.join("+"),

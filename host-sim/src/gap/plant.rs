@@ -203,6 +203,10 @@ pub struct Simulation {
     pub outputs: Vec<Vec<f64>>,
     /// Simulated states by name, compared with `x:<name>` truth columns when present.
     pub states: BTreeMap<String, Vec<f64>>,
+    /// Per output channel, the variance the replay adds to each reading on top of the
+    /// sensor noise, where it predicts a spread rather than a value (a torque ripple whose
+    /// phase is unknown); empty or `None` where it predicts values only.
+    pub variances: Vec<Option<Vec<f64>>>,
 }
 
 /// A labelled operating regime: the sample indices that belong to it.

@@ -291,6 +291,7 @@ pub fn simulate_scooter(
     Ok(Simulation {
         outputs: out,
         states: named,
+        variances: Vec::new(),
     })
 }
 

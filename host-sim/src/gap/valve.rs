@@ -270,6 +270,7 @@ pub fn simulate_valve(
     Ok(Simulation {
         outputs: out,
         states,
+        variances: Vec::new(),
     })
 }
 

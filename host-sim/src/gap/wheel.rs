@@ -266,6 +266,37 @@ impl On {
     }
 }
 
+/// Variance of the sampled speed that a ripple and a cogging torque of unknown phase add
+/// at mean current `current` and speed `speed` over a step `dt`. A torque `T sin(k theta)`
+/// makes the speed swing by `T / (J k w) cos(k theta)` around its mean; with the phase
+/// unknown the reading sits anywhere on that swing, variance half its amplitude squared.
+/// Near standstill the swing is capped at what the torque moves the speed in one step.
+fn unknown_phase_variance(
+    p: WheelParams<f64>,
+    ripple: bool,
+    cogging: bool,
+    current: f64,
+    speed: f64,
+    dt: f64,
+) -> f64 {
+    let swing = |torque: f64, k: f64| -> f64 {
+        torque / p.inertia * (1.0 / (k * speed.abs()).max(f64::MIN_POSITIVE)).min(dt)
+    };
+    let mut variance = 0.0;
+    if ripple {
+        let a = swing(
+            (p.torque_constant * current * p.torque_ripple).abs(),
+            3.0 * p.poles,
+        );
+        variance += 0.5 * a * a;
+    }
+    if cogging {
+        let a = swing(p.cogging.abs(), 0.5 * p.poles);
+        variance += 0.5 * a * a;
+    }
+    variance
+}
+
 struct Wheel {
     p: WheelParams<f64>,
     on: On,
@@ -406,6 +437,10 @@ impl GapPlant for WheelGapPlant {
         let mut angle = measured_angle.map_or(0.0, |a| a[0]);
         let mut out_i = Vec::with_capacity(n);
         let mut out_w = Vec::with_capacity(n);
+        // Without the measured angle the ripple's and cogging's phase is unknown: far above
+        // the sample rate they are a spread of the sampled speed, not a value to replay.
+        let spread = measured_angle.is_none() && (on.ripple || on.cogging);
+        let mut var_w = vec![0.0; if spread { n } else { 0 }];
         for k in 0..n {
             // The sample at t_k shows the current of the previous step: the command of
             // step k acts from t_k on (zero-order hold).
@@ -461,6 +496,21 @@ impl GapPlant for WheelGapPlant {
                 angle = a[k];
             }
             let mean_speed = 0.5 * (w0 + speed);
+            if spread {
+                var_w[k + 1] = unknown_phase_variance(
+                    p,
+                    on.ripple,
+                    on.cogging,
+                    0.5 * (i0 + current),
+                    mean_speed,
+                    dt,
+                );
+                angle += mean_speed * dt;
+                if !(speed.is_finite() && current.is_finite()) {
+                    return Err(format!("replay diverged at t = {}", data.t[k]));
+                }
+                continue;
+            }
             // The measured angle pins the phase at the step's end too: otherwise a replayed
             // speed error dw puts the ripple 3 N dw dt off (5 rad for 1 rad/s at 20 Hz), and
             // the fitted ripple itself moves the speed. Taken within half a turn of the
@@ -505,6 +555,11 @@ impl GapPlant for WheelGapPlant {
         Ok(Simulation {
             outputs: vec![out_i, out_w],
             states,
+            variances: if spread {
+                vec![None, Some(var_w)]
+            } else {
+                Vec::new()
+            },
         })
     }
 
