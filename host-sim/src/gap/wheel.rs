@@ -21,6 +21,7 @@ use crate::gap::plant::{
     EffectSpec, FitRange, GapPlant, MotionThresholds, ParamSpec, Params, PlantData, Regime, Scale,
     Side, Simulation, motion_regimes, param,
 };
+use crate::plants::reaction_wheel::{RippleTorques, ripple_step};
 use prognos_core::plants::reaction_wheel::WheelParams;
 use std::collections::BTreeMap;
 
@@ -441,6 +442,7 @@ impl GapPlant for WheelGapPlant {
         // the sample rate they are a spread of the sampled speed, not a value to replay.
         let spread = measured_angle.is_none() && (on.ripple || on.cogging);
         let mut var_w = vec![0.0; if spread { n } else { 0 }];
+        let mut swing = 0.0;
         for k in 0..n {
             // The sample at t_k shows the current of the previous step: the command of
             // step k acts from t_k on (zero-order hold).
@@ -495,7 +497,8 @@ impl GapPlant for WheelGapPlant {
             if let Some(a) = measured_angle {
                 angle = a[k];
             }
-            let mean_speed = 0.5 * (w0 + speed);
+            // The ripple's swing left out, as the truth wheel does (`ripple_step`).
+            let mean_speed = 0.5 * (w0 + speed) - swing;
             if spread {
                 var_w[k + 1] = unknown_phase_variance(
                     p,
@@ -526,24 +529,19 @@ impl GapPlant for WheelGapPlant {
             };
             // Ripple and cogging oscillate far above the sample rate: exact integral of
             // sin(k theta) over the step at the mean speed.
-            let integral = |kk: f64| -> f64 {
-                if (kk * mean_speed * dt).abs() > 1e-6 {
-                    ((kk * angle).cos() - (kk * angle_end).cos()) / (kk * mean_speed)
+            let torques = RippleTorques {
+                ripple: if on.ripple {
+                    p.torque_constant * 0.5 * (i0 + current) * p.torque_ripple
                 } else {
-                    (kk * angle).sin() * dt
-                }
+                    0.0
+                },
+                cogging: if on.cogging { p.cogging } else { 0.0 },
+                poles: p.poles,
+                inertia: p.inertia,
             };
-            if on.ripple {
-                speed += p.torque_constant
-                    * 0.5
-                    * (i0 + current)
-                    * p.torque_ripple
-                    * integral(3.0 * p.poles)
-                    / p.inertia;
-            }
-            if on.cogging {
-                speed += p.cogging * integral(0.5 * p.poles) / p.inertia;
-            }
+            let (change, swing_end) = ripple_step(&torques, angle, angle_end, mean_speed, dt);
+            speed += change;
+            swing = swing_end;
             angle = angle_end.rem_euclid(std::f64::consts::TAU);
             if !(speed.is_finite() && current.is_finite()) {
                 return Err(format!("replay diverged at t = {}", data.t[k]));
@@ -700,6 +698,35 @@ mod tests {
             .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
         assert!(effect > 5e-3, "{effect}");
         assert!(err < 1e-3 * effect, "{err} vs {effect}");
+    }
+
+    #[test]
+    fn without_the_angle_ripple_is_a_spread_of_the_speed_not_a_replayed_value() {
+        // Far above the sample rate and with its phase unknown, the ripple leaves the mean
+        // replay alone and predicts the speed's spread: half the squared swing
+        // K_t I B / (J 3 N w).
+        let data = profile(400);
+        let plant = WheelGapPlant;
+        let mut params = plant.default_params();
+        params.insert("torque_ripple".into(), 300.0);
+        let on = plant.simulate(&params, &["torque_ripple"], &data).unwrap();
+        let off = plant.simulate(&params, &[], &data).unwrap();
+        assert_eq!(on.outputs, off.outputs);
+        assert!(off.variances.is_empty());
+        let spread = on.variances[1].as_ref().unwrap();
+        assert!(on.variances[0].is_none());
+        for k in [100, 190, 390] {
+            // The step into sample k, at its mean current and speed.
+            let mean = |c: usize| 0.5 * (on.outputs[c][k - 1] + on.outputs[c][k]);
+            let (i, w) = (mean(0), mean(1));
+            let swing = 0.029 * i * 300.0 / (0.0077 * 108.0 * w);
+            let expected = 0.5 * swing * swing;
+            assert!(
+                (spread[k] - expected).abs() < 0.05 * expected && expected > 1e-4,
+                "{k}: {} vs {expected}",
+                spread[k]
+            );
+        }
     }
 
     #[test]
