@@ -5,9 +5,9 @@
 //! (`I = G_d (V + f3 + f5)`, with `f3`/`f5` only when those effects are on), and
 //! `J dw/dt = K_t I - c_v w` with the viscous coefficient `viscous_coefficient` at
 //! `reference_temperature`. Inputs: `u:command` (V), optional `u:temperature` (degC, needed
-//! by `viscous_temperature`), optional `u:angle` (rad, the commutation angle; without it the
-//! angle is integrated from the replayed speed, so ripple and cogging lose their phase over
-//! long records). Outputs: `y:current` (A), `y:speed` (rad/s).
+//! by `viscous_temperature`), optional `u:angle` (rad, the commutation angle; without it
+//! ripple and cogging, far above the sample rate, have no phase to replay and are fitted as
+//! the spread they add to the sampled speed). Outputs: `y:current` (A), `y:speed` (rad/s).
 //!
 //! Catalogue (each switched on by name; the fitted parameters are model parameters):
 //! `coulomb_friction` (`tau_c sign(w)`), `torque_ripple` (motor torque times
@@ -398,8 +398,8 @@ impl GapPlant for WheelGapPlant {
             ("temperature", "degC; viscous_temperature"),
             (
                 "angle",
-                "rad, the commutation angle; without it ripple and cogging integrate the \
-                 replayed speed and lose their phase over long records",
+                "rad, the commutation angle; without it ripple and cogging have no phase \
+                 and are fitted as the spread they add to the sampled speed",
             ),
         ]
     }
