@@ -187,6 +187,8 @@ pub struct CandidateRecord {
     pub score: f64,
     /// Held-out gap before and after, shrink.
     pub gap: [f64; 3],
+    /// p-value of the worst held-out block (see `Evaluation::worst_block_p`).
+    pub worst_block_p: f64,
     /// Per channel: training RSS, count, held-out RSS, count.
     pub rss: Vec<[f64; 4]>,
 }
@@ -1488,6 +1490,7 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
                 effect: e.effect.clone(),
                 score: e.score,
                 gap: [e.gap_before, e.gap_after, e.shrink],
+                worst_block_p: e.worst_block_p,
                 rss: e.channel_rss.clone(),
             })
             .collect(),
