@@ -1774,10 +1774,14 @@ pub fn summary(outcomes: &[Outcome]) -> String {
             at2.singles.to_string(),
         ],
         vec![
-            format!(
-                "top-1 up to a confusable set (mean {:.2} others)",
-                at2.mean_confusable
-            ),
+            if at2.mean_confusable.is_nan() {
+                "top-1 up to a confusable set".into()
+            } else {
+                format!(
+                    "top-1 up to a confusable set (mean {:.2} others)",
+                    at2.mean_confusable
+                )
+            },
             pct(at2.top1_up_to_confusable),
             "-".into(),
             at2.singles.to_string(),
