@@ -21,12 +21,12 @@ use serde::Serialize;
 /// replay of that channel without the quantiser.
 pub type QuantiserReplay = ((f64, f64), Vec<f64>);
 
-/// `ln N(r; 0, variance)`.
 /// The spread a replay adds to channel `c`'s readings, if any ([`Simulation::variances`]).
 fn added_variance(sim: &Simulation, c: usize) -> Option<&Vec<f64>> {
     sim.variances.get(c).and_then(Option::as_ref)
 }
 
+/// `ln N(r; 0, variance)`.
 fn gaussian_log_density(r: f64, variance: f64) -> f64 {
     -0.5 * (std::f64::consts::TAU * variance).ln() - 0.5 * r * r / variance
 }
@@ -884,18 +884,19 @@ impl<'a> Problem<'a> {
             .any(|c| matches!(c, Component::Generic(GenericKind::Quantisation, _)));
         let spread = sim.variances.iter().any(Option::is_some);
         let c = if quantised || spread {
-            self.quantised_train_cost(&sim, &fitted)
+            self.likelihood_train_cost(&sim, &fitted)
         } else {
             self.train_cost(&sim)
         };
         if c.is_finite() { c } else { f64::INFINITY }
     }
 
-    /// [`Problem::train_cost`] with a quantiser's channel scored as the held-out score
-    /// does, by its per-sample reading variance (`-2 ln` likelihood up to a constant): by
-    /// squared error alone, a quantiser whose mean misses a few steps is fitted with a
-    /// noise that smooths its mean, which the likelihood then rejects.
-    fn quantised_train_cost(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> f64 {
+    /// [`Problem::train_cost`] with a quantiser's or a spread's channel scored as the
+    /// held-out score does, by its per-sample reading variance (`-2 ln` likelihood up to a
+    /// constant): by squared error alone, a quantiser whose mean misses a few steps is
+    /// fitted with a noise that smooths its mean, which the likelihood then rejects, and a
+    /// spread (which leaves the mean alone) is not fitted at all.
+    fn likelihood_train_cost(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> f64 {
         let predicted = self.predicted_variances(&self.quantisers(fitted), sim);
         let train = self.channel_rss(sim, &self.train);
         let mut cost = 0.0;
