@@ -194,6 +194,11 @@ pub enum Command {
         /// Scale the sample time by this factor (records keep their duration).
         #[arg(long, default_value_t = 1.0, value_parser = positive_number)]
         sample_time_scale: f64,
+        /// How the written rows relate inputs and samples: `before` (the row's input acts
+        /// after its sample), `at` (outputs that follow the input at once show it) or
+        /// `after` (the row's input acted over the step ending at its sample).
+        #[arg(long, value_enum, default_value_t = crate::gap::plant::InputTiming::Before)]
+        input_timing: crate::gap::plant::InputTiming,
         /// Diagnose the labelled datasets in this folder instead of generating.
         #[arg(long)]
         datasets: Option<PathBuf>,
@@ -530,6 +535,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             model_spread,
             noise_scale,
             sample_time_scale,
+            input_timing,
             datasets,
             write_datasets,
             out,
@@ -545,6 +551,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 model_spread,
                 noise_scale,
                 sample_time_scale,
+                input_timing,
             };
             let started = Instant::now();
             let (_, text) = crate::gap::bench::run_bench(

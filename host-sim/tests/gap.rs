@@ -4,6 +4,7 @@
 use prognos_sim::gap::bench::{
     BenchOptions, CaseKind, Dataset, Excitation, Outcome, generate, run_bench, run_one, score,
 };
+use prognos_sim::gap::plant::InputTiming;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -912,4 +913,71 @@ fn a_clip_just_below_the_supply_is_found_at_a_fast_sample_rate() {
     let d = valve_set("valve-output_saturation-r4-s0", options);
     assert_eq!(d.label.channel.as_deref(), Some("y:pt"));
     assert_found(&d, "output_saturation:pt", 0.8);
+}
+
+/// The first `none` set of `plant` (base seed 5) written with `input_timing`.
+fn none_set(plant: &str, input_timing: InputTiming) -> Dataset {
+    let opts = BenchOptions {
+        plants: vec![plant.into()],
+        seeds: 1,
+        ratios: vec![],
+        seed: 5,
+        only: vec!["no-such-effect".into()],
+        extra_sets: 1,
+        input_timing,
+        ..BenchOptions::default()
+    };
+    generate(plant, &opts)
+        .unwrap()
+        .into_iter()
+        .find(|d| d.label.kind == CaseKind::None)
+        .unwrap()
+}
+
+#[test]
+fn records_of_other_input_timings_are_read_as_they_were_written() {
+    // Rows that show the input acting over the step ending at them (the lockstep runner's
+    // log), or a wheel current that already follows the row's command (y_k = C x_k + D u_k),
+    // were replayed one row off: each of these `none` sets was `unknown`.
+    let dir = scratch("timing");
+    for (plant, timing, name) in [
+        ("reaction_wheel", InputTiming::At, "at"),
+        ("reaction_wheel", InputTiming::After, "after"),
+        ("valve", InputTiming::After, "after"),
+        ("dc_motor", InputTiming::After, "after"),
+        ("scooter", InputTiming::Before, "before"),
+    ] {
+        let d = none_set(plant, timing);
+        let (_, verdict) = diagnose(&dir, &d);
+        assert_eq!(verdict["verdict"], "none", "{plant} {name}: {verdict:#}");
+        assert_eq!(verdict["input_timing"]["timing"], name, "{plant}");
+        assert_eq!(verdict["input_timing"]["source"], "data", "{plant}");
+    }
+}
+
+#[test]
+fn a_declared_input_timing_is_kept_and_a_bad_one_is_refused_at_its_line() {
+    let dir = scratch("timing-declared");
+    let d = none_set("dc_motor", InputTiming::After);
+    let csv = write(&dir, &d);
+    // Declared as written: the same reading, no alternatives tried.
+    let meta = dir.join("after.meta.toml");
+    std::fs::write(&meta, format!("{}input_timing = \"after\"\n", d.meta)).unwrap();
+    let verdict = gap_with_meta(&csv, &meta, &dir.join("out-after"));
+    assert_eq!(verdict["verdict"], "none");
+    assert_eq!(verdict["input_timing"]["source"], "meta");
+    assert_eq!(verdict["input_timing"]["chi2"].as_array().unwrap().len(), 1);
+    // Declared wrongly, the model is one row off and the gap is real.
+    let meta = dir.join("before.meta.toml");
+    std::fs::write(&meta, format!("input_timing = \"before\"\n{}", d.meta)).unwrap();
+    let verdict = gap_with_meta(&csv, &meta, &dir.join("out-before"));
+    assert_ne!(verdict["verdict"], "none");
+    let text = format!("input_timing = \"sideways\"\n{}", d.meta);
+    let (code, err) = bad(&dir, &d.csv, Some(&text));
+    assert_eq!(code, 2, "{err}");
+    let m = s(&dir.join("data.csv.meta.toml")).to_string();
+    assert!(
+        err.contains(&format!("{m}:1:16: unknown input_timing `sideways`")),
+        "{err}"
+    );
 }

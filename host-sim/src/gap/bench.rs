@@ -21,7 +21,7 @@ use crate::gap::dc_motor::{DcMotorPlant, simulate_motor};
 use crate::gap::diagnose::diagnose_recording;
 use crate::gap::effects::GenericKind;
 use crate::gap::meta::parse_gap_meta;
-use crate::gap::plant::{GapPlant, PlantData};
+use crate::gap::plant::{GapPlant, InputTiming, PlantData};
 use crate::gap::scooter::{ScooterGapPlant, simulate_scooter};
 use crate::gap::start::{refit_start, start_sensitivities};
 use crate::gap::valve::{TruthExtras as ValveTruthExtras, ValveGapPlant, simulate_valve};
@@ -266,6 +266,8 @@ pub struct BenchOptions {
     /// The sample time is the bench's default times this, the record as long as by
     /// default (more or fewer samples).
     pub sample_time_scale: f64,
+    /// How the written rows relate inputs and samples (the diagnoser is not told).
+    pub input_timing: InputTiming,
 }
 
 /// What a bench plant varies from the bench's defaults.
@@ -275,6 +277,7 @@ struct Variation {
     model_spread: f64,
     noise_scale: f64,
     sample_time_scale: f64,
+    input_timing: InputTiming,
 }
 
 impl Default for Variation {
@@ -284,6 +287,7 @@ impl Default for Variation {
             model_spread: 0.0,
             noise_scale: 1.0,
             sample_time_scale: 1.0,
+            input_timing: InputTiming::Before,
         }
     }
 }
@@ -345,6 +349,7 @@ impl Default for BenchOptions {
             model_spread: 0.0,
             noise_scale: 1.0,
             sample_time_scale: 1.0,
+            input_timing: InputTiming::Before,
         }
     }
 }
@@ -565,8 +570,14 @@ impl BenchPlant for WheelBench {
         let (mut current, mut speed, mut angle) = (Vec::new(), Vec::new(), Vec::new());
         let inertia = wheel.params.inertia;
         let omega_d = std::f64::consts::TAU * 0.7;
+        let current_at_row =
+            self.vary.input_timing == InputTiming::At && !wheel.effects.driver_lowpass;
         for k in 0..n {
-            current.push(wheel.current);
+            current.push(if current_at_row {
+                wheel.current_following(command[k])
+            } else {
+                wheel.current
+            });
             speed.push(wheel.speed);
             angle.push(wheel.angle);
             let t0 = wheel.time;
@@ -1130,6 +1141,11 @@ fn visible_reference(bp: &dyn BenchPlant, seed: u64, clean: &Clean) -> Option<Ve
         // The clean run's own first sample: a window fit would be off by the curvature of
         // a record that starts in a transient.
         initial_window: 0.0,
+        // `After` rows are written from a `Before` run (see `dataset`).
+        input_timing: match bp.variation().input_timing {
+            InputTiming::At => InputTiming::At,
+            _ => InputTiming::Before,
+        },
         ..Default::default()
     };
     data.inputs = clean.inputs.iter().cloned().collect();
@@ -1247,8 +1263,20 @@ fn dataset(bp: &dyn BenchPlant, name: String, seed: u64, spec: &Spec, label: Lab
         .iter()
         .map(|(n, m)| (n.as_str(), *m))
         .collect();
-    let clean = bp.clean(seed, &effects);
+    let mut clean = bp.clean(seed, &effects);
     let measured = noisy(bp, &clean, spec, seed);
+    if bp.variation().input_timing == InputTiming::After {
+        // Each row shows the input that acted over the step ending at it.
+        let sampled = crate::gap::plant::builtin_plant(bp.plant())
+            .map(|p| p.sampled_inputs())
+            .unwrap_or_default();
+        for (name, u) in clean.inputs.iter_mut() {
+            if !sampled.contains(&name.as_str()) && !u.is_empty() {
+                u.pop();
+                u.insert(0, u[0]);
+            }
+        }
+    }
     Dataset {
         name,
         csv: to_csv(bp, &clean, &measured),
@@ -1276,6 +1304,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
         model_spread: opts.model_spread,
         noise_scale: opts.noise_scale,
         sample_time_scale: opts.sample_time_scale,
+        input_timing: opts.input_timing,
     };
     let bp = bench_plant(plant, vary)
         .ok_or_else(|| SimError::Run(format!("gap-bench has no generator for plant `{plant}`")))?;

@@ -6,13 +6,18 @@ use crate::error::SimError;
 use crate::gap::analysis::{ALPHA, WhereReport, analyse};
 use crate::gap::effects::{Component, Evaluation, Problem, flat_values};
 use crate::gap::meta::{GapMeta, read_gap_meta};
-use crate::gap::plant::{BUILTIN_PLANTS, GapPlant, PlantData, Simulation, builtin_plant};
+use crate::gap::plant::{
+    BUILTIN_PLANTS, GapPlant, InputTiming, PlantData, Simulation, builtin_plant,
+};
 use crate::gap::start::start_sensitivities;
 use crate::gap::stats::{noise_std_from_differences, second_differences};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
 
+/// Another input timing than `before` is taken when it lowers the user's model's training
+/// chi-square by this much (10: 5 nats of likelihood, as [`MIN_SCORE`] asks of an effect).
+pub const TIMING_MARGIN: f64 = 10.0;
 /// Fewest samples that can be split into training and held-out blocks.
 pub const MIN_SAMPLES: usize = 200;
 /// Number of contiguous blocks; even ones train, odd ones are held out.
@@ -100,6 +105,9 @@ pub struct Diagnosis {
     /// Which of the [`BLOCKS`] blocks were held out: `odd`, or `even (from 2)` when the
     /// first fold found no explanation and the folds were swapped (see [`diagnose_with`]).
     pub held_out_blocks: &'static str,
+    /// How the rows were read: the timing and each tried timing's training chi-square
+    /// of the user's model.
+    pub input_timing: TimingChoice,
     /// Every test behind `where`.
     pub tests: Vec<crate::gap::analysis::TestResult>,
     /// Heat-map cells.
@@ -276,8 +284,31 @@ pub fn diagnose_with(
     }
     let mut warnings = meta.warnings.clone();
     warnings.extend(unused_columns(plant, recording, csv_path));
-    let mut data = plant_data(recording, dt);
-    data.initial_window = plant.initial_window();
+    let mut read = plant_data(recording, dt);
+    read.initial_window = plant.initial_window();
+    let timings: Vec<InputTiming> = match &meta.input_timing {
+        Some(v) if v.value != "auto" => {
+            vec![InputTiming::from_name(&v.value).ok_or_else(|| {
+                meta.error_at(
+                    v.offset,
+                    format!(
+                        "unknown input_timing `{}` (known: before, at, after, auto)",
+                        v.value
+                    ),
+                )
+            })?]
+        }
+        _ => InputTiming::ALL
+            .into_iter()
+            .filter(|t| *t != InputTiming::At || plant.feedthrough())
+            .collect(),
+    };
+    let sampled = plant.sampled_inputs();
+    let readings: Vec<PlantData> = timings
+        .iter()
+        .map(|t| read.with_timing(*t, &sampled))
+        .collect();
+    let data = &readings[0];
     let train: Vec<bool> = (0..n).map(|k| (k * BLOCKS / n).is_multiple_of(2)).collect();
     let test: Vec<bool> = train.iter().map(|b| !b).collect();
     let mut sigma = Vec::new();
@@ -324,7 +355,7 @@ pub fn diagnose_with(
         .collect();
     let active: Vec<&str> = sim_effects.iter().map(String::as_str).collect();
     let nominal_full = plant
-        .simulate(&base, &active, &data)
+        .simulate(&base, &active, data)
         .map_err(|e| SimError::Run(format!("replaying the model failed: {e}")))?;
     let select = present.iter().map(|(i, _)| *i).collect::<Vec<_>>();
     let wrapped = SelectPlant {
@@ -339,7 +370,7 @@ pub fn diagnose_with(
         .zip(&sigma)
         .map(|((_, name), s)| (name.clone(), *s))
         .collect();
-    let init_sensitivity = start_sensitivities(&data, &starts, &nominal.outputs, |moved| {
+    let init_sensitivity = start_sensitivities(data, &starts, &nominal.outputs, |moved| {
         wrapped
             .simulate(&base, &active, moved)
             .ok()
@@ -347,7 +378,7 @@ pub fn diagnose_with(
     });
     let mut problem = Problem {
         plant: &wrapped,
-        data: &data,
+        data,
         base,
         sim_effects: sim_effects.clone(),
         plant_effects,
@@ -362,6 +393,7 @@ pub fn diagnose_with(
         init_sensitivity,
     };
     problem.refit_nominal();
+    let timing = choose_timing(&mut problem, &timings, &readings);
     refine_noise_from_residuals(&mut problem, &mut noise);
     let mut report = analyse(&problem);
     let (mut verdict, mut ranking, mut pairs) = decide(&problem, &report);
@@ -445,6 +477,7 @@ pub fn diagnose_with(
             problem.test.iter().filter(|b| **b).count(),
         ],
         held_out_blocks,
+        input_timing: timing,
         tests: report.tests.clone(),
         cells: report.cells.clone(),
         spectrum: report.spectrum.clone(),
@@ -452,6 +485,54 @@ pub fn diagnose_with(
         nominal_rss: problem.rss_split(&problem.nominal),
         warnings,
     })
+}
+
+/// How the record's rows relate inputs and samples, and the evidence.
+#[derive(Clone, Debug, Serialize)]
+pub struct TimingChoice {
+    /// The timing the record was read under ([`InputTiming`]).
+    pub timing: InputTiming,
+    /// `meta` (declared) or `data` (the lowest training chi-square of the user's model).
+    pub source: &'static str,
+    /// Each timing tried, with the user's model's training chi-square under it.
+    pub chi2: Vec<(InputTiming, f64)>,
+}
+
+/// Picks the timing under which the user's model fits the training blocks best, `before`
+/// unless another lowers the chi-square by [`TIMING_MARGIN`], and moves `problem` onto it.
+/// An input read one row off is no effect of the plant: every catalogue delay would try
+/// to mimic it, and the record's own convention would decide the verdict.
+fn choose_timing<'a>(
+    problem: &mut Problem<'a>,
+    timings: &[InputTiming],
+    readings: &'a [PlantData],
+) -> TimingChoice {
+    let first = problem.train_chi2(&problem.nominal);
+    let mut chi2 = vec![(timings[0], first)];
+    let mut best: Option<(usize, Problem<'a>, f64)> = None;
+    for (i, data) in readings.iter().enumerate().skip(1) {
+        let Ok(candidate) = problem.replayed_on(data) else {
+            continue;
+        };
+        let c = candidate.train_chi2(&candidate.nominal);
+        chi2.push((timings[i], c));
+        if c < first - TIMING_MARGIN && best.as_ref().is_none_or(|(_, _, b)| c < *b) {
+            best = Some((i, candidate, c));
+        }
+    }
+    let source = if timings.len() == 1 { "meta" } else { "data" };
+    let timing = match best {
+        Some((i, candidate, _)) => {
+            *problem = candidate;
+            timings[i]
+        }
+        None => timings[0],
+    };
+    TimingChoice {
+        timing,
+        source,
+        chi2,
+    }
 }
 
 /// `u:` and `y:` columns the plant does not read, as warnings (a misspelt optional input

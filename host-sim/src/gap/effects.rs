@@ -11,7 +11,7 @@
 //! from the training residuals) minus `k/2 ln n_train` (BIC-like).
 
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
-use crate::gap::start::{StartSensitivity, refit_start};
+use crate::gap::start::{StartSensitivity, refit_start, start_sensitivities};
 use crate::gap::stats::{holm, variance_ratio_p};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
@@ -524,6 +524,45 @@ impl<'a> Problem<'a> {
             self.plant.simulate(&params, &active, self.data)?
         };
         Ok(self.with_refitted_start(raw, fitted))
+    }
+
+    /// The same problem on `data` (the record read under another
+    /// [`crate::gap::plant::InputTiming`]): the user's model replayed on it, its start
+    /// sensitivities measured and its start refitted.
+    pub fn replayed_on<'b>(&self, data: &'b PlantData) -> Result<Problem<'b>, String>
+    where
+        'a: 'b,
+    {
+        let active: Vec<&str> = self.sim_effects.iter().map(String::as_str).collect();
+        let raw = self.plant.simulate(&self.base, &active, data)?;
+        let starts: Vec<(String, f64)> = self
+            .outputs
+            .iter()
+            .cloned()
+            .zip(self.sigma.iter().copied())
+            .collect();
+        let init_sensitivity = start_sensitivities(data, &starts, &raw.outputs, |moved| {
+            self.plant
+                .simulate(&self.base, &active, moved)
+                .ok()
+                .map(|sim| sim.outputs)
+        });
+        let mut problem = Problem {
+            plant: self.plant,
+            data,
+            nominal: raw.clone(),
+            nominal_raw: raw,
+            init_sensitivity,
+            ..self.clone()
+        };
+        problem.refit_nominal();
+        Ok(problem)
+    }
+
+    /// Chi-square of `sim` over the training samples (each channel's squared residuals
+    /// over its noise variance).
+    pub fn train_chi2(&self, sim: &Simulation) -> f64 {
+        self.train_cost(sim)
     }
 
     /// The user's model with its initial condition refitted (the baseline of every score).

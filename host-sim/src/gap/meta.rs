@@ -50,6 +50,9 @@ pub struct GapMeta {
     pub noise: BTreeMap<String, Located<f64>>,
     /// Free text.
     pub description: Option<String>,
+    /// `input_timing`: `before`, `at`, `after` or `auto` (the default: chosen from the
+    /// data), see [`crate::gap::plant::InputTiming`].
+    pub input_timing: Option<Located<String>>,
     /// Ignored entries, each as `file:line:column: message`.
     pub warnings: Vec<String>,
 }
@@ -140,6 +143,8 @@ pub fn parse_gap_meta(path: &Path, text: &str) -> Result<GapMeta, SimError> {
         noise: BTreeMap<String, toml::Spanned<f64>>,
         #[serde(default)]
         description: Option<String>,
+        #[serde(default)]
+        input_timing: Option<toml::Spanned<String>>,
         #[serde(flatten)]
         unknown: BTreeMap<String, toml::Value>,
     }
@@ -165,8 +170,8 @@ pub fn parse_gap_meta(path: &Path, text: &str) -> Result<GapMeta, SimError> {
             at(
                 top_level_key_offset(text, k),
                 format!(
-                    "ignored unknown key `{k}` (read: plant, dt, sim_effects, description, \
-                     [units], [model], [noise])"
+                    "ignored unknown key `{k}` (read: plant, dt, sim_effects, input_timing, \
+                     description, [units], [model], [noise])"
                 ),
             )
             .to_string()
@@ -226,6 +231,10 @@ pub fn parse_gap_meta(path: &Path, text: &str) -> Result<GapMeta, SimError> {
             .collect(),
         noise,
         description: raw.description,
+        input_timing: raw.input_timing.map(|s| Located {
+            offset: s.span().start,
+            value: s.into_inner(),
+        }),
         warnings,
     })
 }

@@ -110,6 +110,45 @@ impl EffectSpec {
     }
 }
 
+/// When a row's sample is taken relative to the row's input: the three conventions a
+/// record may follow. Plants replay `Before`; [`PlantData::with_timing`] moves `After`
+/// records onto it, and a plant with direct feedthrough ([`GapPlant::feedthrough`]) reads
+/// `At` itself.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum InputTiming {
+    /// The row's input acts from the row's time to the next (zero-order hold) and the
+    /// sample was taken just before: an output that follows the input at once still shows
+    /// the previous row's input (what `gap-bench` writes).
+    #[default]
+    Before,
+    /// The row's input acts from the row's time to the next, and an output that follows the
+    /// input at once already shows it (`y_k = C x_k + D u_k`, the textbook discrete loop).
+    At,
+    /// The row's input acted over the interval that ends at the row's time, and the sample
+    /// was taken after it (the lockstep runner's log).
+    After,
+}
+
+impl InputTiming {
+    /// Every timing, the default first.
+    pub const ALL: [InputTiming; 3] = [InputTiming::Before, InputTiming::At, InputTiming::After];
+
+    /// Name as written in the meta file's `input_timing`.
+    pub fn name(self) -> &'static str {
+        match self {
+            InputTiming::Before => "before",
+            InputTiming::At => "at",
+            InputTiming::After => "after",
+        }
+    }
+
+    /// The timing written `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|t| t.name() == name)
+    }
+}
+
 /// Recorded data as the plant sees it: time, inputs by name, measurements by name (NaN =
 /// missing sample), truth by name.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -130,6 +169,9 @@ pub struct PlantData {
     /// Offsets added to [`PlantData::first_output`] (the diagnoser perturbs the initial
     /// condition with them to measure its effect on the replay).
     pub initial_offsets: BTreeMap<String, f64>,
+    /// How the rows relate inputs and samples; after [`PlantData::with_timing`] only
+    /// `Before` or `At`.
+    pub input_timing: InputTiming,
 }
 
 impl PlantData {
@@ -146,6 +188,25 @@ impl PlantData {
     /// An input column, if present.
     pub fn input(&self, name: &str) -> Option<&[f64]> {
         self.inputs.get(name).map(Vec::as_slice)
+    }
+
+    /// The data as a plant replays them under `timing`: for `After` every held input
+    /// (those not in `sampled`, the readings taken at the sample time such as a measured
+    /// angle) moves one row earlier, so that row k holds the input acting from t_k on; the
+    /// last row keeps its own.
+    pub fn with_timing(&self, timing: InputTiming, sampled: &[&str]) -> PlantData {
+        let mut data = self.clone();
+        data.input_timing = timing;
+        if timing == InputTiming::After {
+            data.input_timing = InputTiming::Before;
+            for (name, u) in data.inputs.iter_mut() {
+                if !sampled.contains(&name.as_str()) && u.len() > 1 {
+                    u.remove(0);
+                    u.push(u[u.len() - 1]);
+                }
+            }
+        }
+        data
     }
 
     /// A measured column, if present.
@@ -334,6 +395,19 @@ pub trait GapPlant: Sync {
     /// `sim_effects` (the valve's orifices choke unless `[model]` says they never do);
     /// they are no candidates.
     fn model_effects(&self, _params: &Params) -> Vec<&'static str> {
+        Vec::new()
+    }
+
+    /// Whether an output follows an input at once (the wheel's current without its
+    /// driver lag): only then do [`InputTiming::At`] records differ from `Before` ones, and
+    /// the replay must read [`PlantData::input_timing`].
+    fn feedthrough(&self) -> bool {
+        false
+    }
+
+    /// Inputs that are readings taken at the sample time (a measured angle), not commands
+    /// held over the step: [`PlantData::with_timing`] leaves them in their rows.
+    fn sampled_inputs(&self) -> Vec<&'static str> {
         Vec::new()
     }
 

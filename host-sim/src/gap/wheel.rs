@@ -18,8 +18,8 @@
 //! (`c_v(T) = c_v(T_ref) - viscous_slope (T - T_ref)`, the paper's `c0 - c1 (T + 30)`).
 
 use crate::gap::plant::{
-    EffectSpec, FitRange, GapPlant, MotionThresholds, ParamSpec, Params, PlantData, Regime, Scale,
-    Side, Simulation, motion_regimes, param,
+    EffectSpec, FitRange, GapPlant, InputTiming, MotionThresholds, ParamSpec, Params, PlantData,
+    Regime, Scale, Side, Simulation, motion_regimes, param,
 };
 use crate::plants::reaction_wheel::{RippleTorques, ripple_step};
 use prognos_core::plants::reaction_wheel::WheelParams;
@@ -404,6 +404,14 @@ impl GapPlant for WheelGapPlant {
         ]
     }
 
+    fn feedthrough(&self) -> bool {
+        true
+    }
+
+    fn sampled_inputs(&self) -> Vec<&'static str> {
+        vec!["angle", "temperature"]
+    }
+
     fn outputs(&self) -> Vec<&'static str> {
         vec!["current", "speed"]
     }
@@ -443,9 +451,16 @@ impl GapPlant for WheelGapPlant {
         let spread = measured_angle.is_none() && (on.ripple || on.cogging);
         let mut var_w = vec![0.0; if spread { n } else { 0 }];
         let mut swing = 0.0;
+        let current_at_row = data.input_timing == InputTiming::At && !on.lowpass;
         for k in 0..n {
             // The sample at t_k shows the current of the previous step: the command of
-            // step k acts from t_k on (zero-order hold).
+            // step k acts from t_k on (zero-order hold). Recorded `At` the command, the
+            // driver's algebraic current already follows it.
+            if current_at_row {
+                for _ in 0..3 {
+                    current = p.drive_gain * (command[k] + w.feedback(current, speed));
+                }
+            }
             out_i.push(current);
             out_w.push(speed);
             if k + 1 == n {

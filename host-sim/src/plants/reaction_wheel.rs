@@ -125,6 +125,19 @@ impl TruthWheel {
             .max(self.params.viscous_floor)
     }
 
+    /// The current a sample taken as `command_v` is applied would read: the driver's
+    /// algebraic current following it at once, or the lagging current state.
+    pub fn current_following(&self, command_v: f64) -> f64 {
+        if self.effects.driver_lowpass {
+            return self.current;
+        }
+        let mut current = self.current;
+        for _ in 0..3 {
+            current = self.params.drive_gain * (command_v + self.feedback(current, self.speed));
+        }
+        current
+    }
+
     /// Command-voltage feedback from the limiters (V).
     fn feedback(&self, current: f64, speed: f64) -> f64 {
         let p = &self.params;
