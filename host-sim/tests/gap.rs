@@ -406,7 +406,7 @@ fn gap_bench_on_a_folder_goes_past_unlabelled_and_bad_datasets() {
     let sc = score(&outcomes, |_| true);
     assert_eq!((sc.nones, sc.false_attribution), (2, 1.0));
     assert!(
-        text.contains("(1 without a label, 2 not diagnosed)"),
+        text.contains("(1 without a label, 2 not diagnosed; inputs read as 2 before)"),
         "{text}"
     );
     assert!(

@@ -163,6 +163,8 @@ pub struct Outcome {
     pub top3: Vec<String>,
     /// Located channel.
     pub channel: String,
+    /// The input timing the diagnosis read the record with (empty when it failed).
+    pub input_timing: String,
     /// Held-out shrink of the verdict's effect (0 for none / unknown).
     pub shrink: f64,
     /// Candidates the held-out data do not separate from the verdict.
@@ -1509,6 +1511,7 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
             .map(|e| e.effect.clone())
             .collect(),
         channel: diag.location.channel.clone(),
+        input_timing: diag.input_timing.timing.name().to_string(),
         shrink,
         confusable: diag.confusable.iter().map(|c| c.effect.clone()).collect(),
         candidates: diag
@@ -1537,6 +1540,7 @@ pub fn outcome(d: &Dataset) -> Outcome {
         verdict: "error".into(),
         top3: Vec::new(),
         channel: String::new(),
+        input_timing: String::new(),
         shrink: 0.0,
         confusable: Vec::new(),
         candidates: Vec::new(),
@@ -1780,9 +1784,23 @@ pub fn summary(outcomes: &[Outcome]) -> String {
         .filter(|o| o.label.kind == CaseKind::Unlabelled)
         .count();
     let failed = outcomes.iter().filter(|o| o.error.is_some()).count();
+    let mut timings: Vec<(&str, usize)> = Vec::new();
+    for o in outcomes.iter().filter(|o| !o.input_timing.is_empty()) {
+        match timings.iter_mut().find(|(t, _)| *t == o.input_timing) {
+            Some((_, n)) => *n += 1,
+            None => timings.push((&o.input_timing, 1)),
+        }
+    }
+    let timings: Vec<String> = timings.iter().map(|(t, n)| format!("{n} {t}")).collect();
     s.push_str(&format!(
-        "gap-bench: {} datasets ({unlabelled} without a label, {failed} not diagnosed)\n\n{}\n",
+        "gap-bench: {} datasets ({unlabelled} without a label, {failed} not diagnosed; \
+         inputs read as {})\n\n{}\n",
         outcomes.len(),
+        if timings.is_empty() {
+            "-".to_string()
+        } else {
+            timings.join(", ")
+        },
         if rated {
             "At effect-to-noise ratio >= 2 (targets in brackets):"
         } else {

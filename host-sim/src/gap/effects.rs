@@ -560,9 +560,15 @@ impl<'a> Problem<'a> {
     }
 
     /// Chi-square of `sim` over the training samples (each channel's squared residuals
-    /// over its noise variance).
-    pub fn train_chi2(&self, sim: &Simulation) -> f64 {
-        self.train_cost(sim)
+    /// over its noise variance), and its expectation under the noise alone (the number of
+    /// finite training readings).
+    pub fn train_chi2(&self, sim: &Simulation) -> (f64, usize) {
+        let terms = self
+            .channel_rss(sim, &self.train)
+            .iter()
+            .map(|(_, n)| n)
+            .sum();
+        (self.train_cost(sim), terms)
     }
 
     /// The user's model with its initial condition refitted (the baseline of every score).
