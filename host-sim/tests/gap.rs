@@ -981,3 +981,129 @@ fn a_declared_input_timing_is_kept_and_a_bad_one_is_refused_at_its_line() {
         "{err}"
     );
 }
+
+/// `csv` with each column in `units` ((column, unit, scale, offset)) rewritten as
+/// `value * scale + offset`.
+fn in_other_units(csv: &str, units: &[(&str, &str, f64, f64)]) -> String {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let mut out = header.join(",") + "\n";
+    for line in lines {
+        let cells: Vec<String> = line
+            .split(',')
+            .zip(&header)
+            .map(
+                |(cell, name)| match units.iter().find(|(c, ..)| c == name) {
+                    Some((_, _, scale, offset)) => {
+                        format!("{}", cell.parse::<f64>().unwrap() * scale + offset)
+                    }
+                    None => cell.to_string(),
+                },
+            )
+            .collect();
+        out.push_str(&(cells.join(",") + "\n"));
+    }
+    out
+}
+
+#[test]
+fn columns_in_other_units_are_converted_and_a_wrong_dimension_is_refused() {
+    // The same wheel record logged in rpm, mA, kelvin and degrees, its speed noise declared
+    // in rpm: read through `[units]`, the diagnosis is the SI one. Unread, the rpm are a
+    // speed sensor scale of 9.5 and the verdict is off.
+    let dir = scratch("units");
+    let d = one("reaction_wheel", "viscous_temperature", 4.0);
+    let (_, si) = diagnose(&dir, &d);
+    assert_eq!(
+        si["verdict"], "viscous_temperature",
+        "{:#}",
+        si["ranking"][0]
+    );
+    let rpm = 60.0 / (2.0 * std::f64::consts::PI);
+    let units = [
+        ("y:speed", "rpm", rpm, 0.0),
+        ("y:current", "mA", 1e3, 0.0),
+        ("u:temperature", "K", 1.0, 273.15),
+        ("u:angle", "deg", 180.0 / std::f64::consts::PI, 0.0),
+    ];
+    let csv = dir.join("logged.csv");
+    std::fs::write(&csv, in_other_units(&d.csv, &units)).unwrap();
+    let speed_noise = si["noise"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["channel"] == "y:speed")
+        .unwrap()["std"]
+        .as_f64()
+        .unwrap();
+    let mut table = String::from("[units]\n");
+    for (column, unit, ..) in &units {
+        if d.csv.lines().next().unwrap().contains(column) {
+            table.push_str(&format!("\"{column}\" = \"{unit}\"\n"));
+        }
+    }
+    let meta = dir.join("logged.meta.toml");
+    std::fs::write(
+        &meta,
+        format!(
+            "{}{table}[noise]\n\"y:speed\" = {}\n",
+            d.meta,
+            speed_noise * rpm
+        ),
+    )
+    .unwrap();
+    let v = gap_with_meta(&csv, &meta, &dir.join("out-units"));
+    assert_eq!(v["verdict"], si["verdict"]);
+    let fitted = |v: &serde_json::Value| v["ranking"][0]["params"][0][1].as_f64().unwrap();
+    assert!(
+        (fitted(&v) / fitted(&si) - 1.0).abs() < 1e-3,
+        "{} vs {}",
+        fitted(&v),
+        fitted(&si)
+    );
+    let noise = &v["noise"].as_array().unwrap()[1];
+    assert_eq!(
+        (&noise["channel"], &noise["source"]),
+        (&"y:speed".into(), &"meta".into())
+    );
+    assert!((noise["std"].as_f64().unwrap() / speed_noise - 1.0).abs() < 1e-12);
+    let warnings = v["warnings"].to_string();
+    assert!(
+        warnings.contains("`y:speed` read in rpm and converted to rad/s"),
+        "{warnings}"
+    );
+    // Without `[units]` the rpm are taken for rad/s.
+    let meta = dir.join("unread.meta.toml");
+    std::fs::write(&meta, &d.meta).unwrap();
+    let v = gap_with_meta(&csv, &meta, &dir.join("out-unread"));
+    assert_ne!(v["verdict"], si["verdict"]);
+    // A unit of another dimension is refused at its line; an unknown one is read as the
+    // plant's, with a warning at its line.
+    let text = format!("{}[units]\n\"y:speed\" = \"kPa\"\n", d.meta);
+    let (code, err) = bad(&dir, &d.csv, Some(&text));
+    assert_eq!(code, 2, "{err}");
+    let line = text.lines().count();
+    let m = s(&dir.join("data.csv.meta.toml")).to_string();
+    assert!(
+        err.contains(&format!(
+            "{m}:{line}:1: `y:speed` is given in `kPa` (pressure) but plant `reaction_wheel` \
+             reads it in rad/s (angular speed)"
+        )),
+        "{err}"
+    );
+    let meta = dir.join("odd.meta.toml");
+    std::fs::write(
+        &meta,
+        format!("{}[units]\n\"y:speed\" = \"furlong/fortnight\"\n", d.meta),
+    )
+    .unwrap();
+    let v = gap_with_meta(&write(&dir, &d), &meta, &dir.join("out-odd"));
+    assert_eq!(v["verdict"], si["verdict"]);
+    assert!(
+        v["warnings"]
+            .to_string()
+            .contains("unit `furlong/fortnight` of `y:speed` is not one the diagnoser converts"),
+        "{}",
+        v["warnings"]
+    );
+}

@@ -181,14 +181,20 @@ impl GapPlant for DcMotorPlant {
     }
 
     fn optional_inputs(&self) -> Vec<(&'static str, &'static str)> {
-        vec![(
-            "load_torque",
-            "N m, a known load on the shaft (0 without it)",
-        )]
+        vec![("load_torque", "a known load on the shaft; 0 without it")]
     }
 
     fn outputs(&self) -> Vec<&'static str> {
         vec!["current", "speed"]
+    }
+
+    fn units(&self) -> Vec<(&'static str, &'static str)> {
+        vec![
+            ("u:voltage", "V"),
+            ("u:load_torque", "Nm"),
+            ("y:current", "A"),
+            ("y:speed", "rad/s"),
+        ]
     }
 
     fn effects(&self) -> Vec<EffectSpec> {

@@ -11,8 +11,10 @@ use crate::gap::plant::{
 };
 use crate::gap::start::start_sensitivities;
 use crate::gap::stats::{noise_std_from_differences, second_differences};
+use crate::gap::units::{Conversion, conversion};
 use rayon::prelude::*;
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Another input timing than `before` is taken when it lowers the user's model's training
@@ -126,7 +128,8 @@ pub struct Diagnosis {
     /// Per channel: training RSS, count, held-out RSS, count of the user's model.
     #[serde(skip)]
     pub nominal_rss: Vec<[f64; 4]>,
-    /// What was read but ignored (unknown meta keys, columns the plant does not use).
+    /// What was read but ignored (unknown meta keys and units, columns the plant does not
+    /// use) or converted (columns in another unit than the plant's).
     pub warnings: Vec<String>,
 }
 
@@ -290,6 +293,7 @@ pub fn diagnose_with(
     warnings.extend(unused_columns(plant, recording, csv_path));
     let mut read = plant_data(recording, dt);
     read.initial_window = plant.initial_window();
+    let unit_scales = convert_units(plant, meta, &mut read, &mut warnings)?;
     let timings: Vec<InputTiming> = match &meta.input_timing {
         Some(v) if v.value != "auto" => {
             vec![InputTiming::from_name(&v.value).ok_or_else(|| {
@@ -323,7 +327,11 @@ pub fn diagnose_with(
         let y = data.outputs[name].clone();
         let key = format!("y:{name}");
         let (s, dof, source) = match meta.noise.get(&key) {
-            Some(v) => (v.value, f64::INFINITY, "meta"),
+            Some(v) => (
+                v.value * unit_scales.get(&key).copied().unwrap_or(1.0),
+                f64::INFINITY,
+                "meta",
+            ),
             None => match noise_std_from_differences(&y) {
                 Some((s, dof)) => match still_lattice_step(&y) {
                     // Noise below the step: over half the second differences are exactly
@@ -539,6 +547,72 @@ fn choose_timing<'a>(
         source,
         chi2,
     }
+}
+
+/// Converts each column the meta file's `[units]` gives in another unit than the plant
+/// reads (noted in `warnings`; an unknown unit is read as the plant's, with a warning; a
+/// unit of another dimension is refused at its line). Returns each converted column's
+/// scale, for its `[noise]` std.
+fn convert_units(
+    plant: &dyn GapPlant,
+    meta: &GapMeta,
+    data: &mut PlantData,
+    warnings: &mut Vec<String>,
+) -> Result<BTreeMap<String, f64>, SimError> {
+    let mut scales = BTreeMap::new();
+    for (column, given) in &meta.units {
+        let Some(wanted) = plant.unit_of(column) else {
+            continue;
+        };
+        let at = |message: String| meta.error_at(given.offset, message);
+        match conversion(&given.value, wanted) {
+            Conversion::Linear { scale, offset } => {
+                if scale == 1.0 && offset == 0.0 {
+                    continue;
+                }
+                let series = match column.split_once(':') {
+                    Some(("u", name)) => data.inputs.get_mut(name),
+                    Some(("y", name)) => data.outputs.get_mut(name),
+                    _ => None,
+                };
+                for x in series.into_iter().flatten() {
+                    *x = *x * scale + offset;
+                }
+                scales.insert(column.clone(), scale.abs());
+                warnings.push(
+                    at(format!(
+                        "`{column}` read in {} and converted to {wanted}, the unit of plant \
+                         `{}` (the verdict's values are in {wanted})",
+                        given.value,
+                        plant.name()
+                    ))
+                    .to_string(),
+                );
+            }
+            Conversion::UnknownUnit => warnings.push(
+                at(format!(
+                    "unit `{}` of `{column}` is not one the diagnoser converts (see \
+                     docs/gap.md); read as {wanted}, the unit of plant `{}`",
+                    given.value,
+                    plant.name()
+                ))
+                .to_string(),
+            ),
+            Conversion::Mismatch {
+                given: from,
+                wanted: to,
+            } => {
+                return Err(at(format!(
+                    "`{column}` is given in `{}` ({}) but plant `{}` reads it in {wanted} ({})",
+                    given.value,
+                    from.name(),
+                    plant.name(),
+                    to.name()
+                )));
+            }
+        }
+    }
+    Ok(scales)
 }
 
 /// `u:` and `y:` columns the plant does not read, as warnings (a misspelt optional input

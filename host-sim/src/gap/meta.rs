@@ -4,8 +4,9 @@
 //! plant = "reaction_wheel"        # a built-in gap plant (see `gap::plant::builtin_plant`)
 //! dt = 0.05                       # nominal sample time (s); without it, the data's median step
 //! sim_effects = ["driver_lowpass"] # catalogue effects the user's model already includes
+//! input_timing = "before"        # before | at | after | auto (default; see `gap::plant::InputTiming`)
 //! description = "free text"
-//! [units]                          # per column, e.g. "y:speed" = "rad/s"
+//! [units]                          # per column, e.g. "y:speed" = "rpm" (converted, `gap::units`)
 //! [model]                          # parameter values; anything not given takes the default
 //! [noise]                          # optional sensor noise std per channel, e.g. "y:speed" = 3e-3
 //! ```

@@ -27,6 +27,7 @@ pub mod report;
 pub mod scooter;
 pub mod start;
 pub mod stats;
+pub mod units;
 pub mod valve;
 pub mod wheel;
 

@@ -411,6 +411,21 @@ pub trait GapPlant: Sync {
         Vec::new()
     }
 
+    /// The unit the replay reads each column in (`("y:speed", "rad/s")`, spelt as in
+    /// [`crate::gap::units::UNITS`]): a column the meta file's `[units]` gives in another
+    /// unit of the same dimension is converted. Empty: columns are read as they are.
+    fn units(&self) -> Vec<(&'static str, &'static str)> {
+        Vec::new()
+    }
+
+    /// The unit of `column` (`u:` or `y:` prefixed), if the plant gives one.
+    fn unit_of(&self, column: &str) -> Option<&'static str> {
+        self.units()
+            .into_iter()
+            .find(|(c, _)| *c == column)
+            .map(|(_, u)| u)
+    }
+
     /// Span (s) over which the initial condition is fitted from the first samples (see
     /// [`PlantData::first_output`]); 0 for plants whose initial error dies out in a few
     /// samples.
@@ -432,10 +447,15 @@ pub trait GapPlant: Sync {
 pub fn describe(plant: &dyn GapPlant) -> String {
     let list = |v: Vec<String>| v.join(", ");
     let mut s = format!("### `{}`\n\n", plant.name());
+    let column = |c: String| match plant.unit_of(&c) {
+        Some("1") => format!("`{c}` (0/1)"),
+        Some(unit) => format!("`{c}` in {unit}"),
+        None => format!("`{c}`"),
+    };
     let optional: Vec<String> = plant
         .optional_inputs()
         .iter()
-        .map(|(u, why)| format!("`u:{u}` ({why})"))
+        .map(|(u, why)| format!("{} ({why})", column(format!("u:{u}"))))
         .collect();
     s.push_str(&format!(
         "- required inputs: {}\n- optional inputs: {}\n- outputs: {}\n\n",
@@ -443,7 +463,7 @@ pub fn describe(plant: &dyn GapPlant) -> String {
             plant
                 .required_inputs()
                 .iter()
-                .map(|u| format!("`u:{u}`"))
+                .map(|u| column(format!("u:{u}")))
                 .collect()
         ),
         if optional.is_empty() {
@@ -451,7 +471,13 @@ pub fn describe(plant: &dyn GapPlant) -> String {
         } else {
             list(optional)
         },
-        list(plant.outputs().iter().map(|y| format!("`y:{y}`")).collect())
+        list(
+            plant
+                .outputs()
+                .iter()
+                .map(|y| column(format!("y:{y}")))
+                .collect()
+        )
     ));
     s.push_str("| `[model]` parameter | default | meaning |\n|---|---|---|\n");
     for p in plant.parameters() {

@@ -312,6 +312,15 @@ impl GapPlant for ScooterGapPlant {
         vec!["rear_speed", "body_speed", "front_speed"]
     }
 
+    fn units(&self) -> Vec<(&'static str, &'static str)> {
+        vec![
+            ("u:voltage", "V"),
+            ("y:rear_speed", "rad/s"),
+            ("y:body_speed", "m/s"),
+            ("y:front_speed", "rad/s"),
+        ]
+    }
+
     fn effects(&self) -> Vec<EffectSpec> {
         scooter_effects()
     }

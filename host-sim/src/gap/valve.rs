@@ -291,6 +291,19 @@ impl GapPlant for ValveGapPlant {
         vec!["x", "pt", "pb", "q"]
     }
 
+    fn units(&self) -> Vec<(&'static str, &'static str)> {
+        vec![
+            ("u:pl", "Pa"),
+            ("u:pr", "Pa"),
+            ("u:top_port_supply", "1"),
+            ("u:bottom_port_supply", "1"),
+            ("y:x", "m"),
+            ("y:pt", "Pa"),
+            ("y:pb", "Pa"),
+            ("y:q", "m^3/s"),
+        ]
+    }
+
     fn effects(&self) -> Vec<EffectSpec> {
         valve_effects()
     }

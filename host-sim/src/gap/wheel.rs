@@ -395,10 +395,10 @@ impl GapPlant for WheelGapPlant {
 
     fn optional_inputs(&self) -> Vec<(&'static str, &'static str)> {
         vec![
-            ("temperature", "degC; viscous_temperature"),
+            ("temperature", "viscous_temperature"),
             (
                 "angle",
-                "rad, the commutation angle; without it ripple and cogging have no phase \
+                "the commutation angle; without it ripple and cogging have no phase \
                  and are fitted as the spread they add to the sampled speed",
             ),
         ]
@@ -414,6 +414,16 @@ impl GapPlant for WheelGapPlant {
 
     fn outputs(&self) -> Vec<&'static str> {
         vec!["current", "speed"]
+    }
+
+    fn units(&self) -> Vec<(&'static str, &'static str)> {
+        vec![
+            ("u:command", "V"),
+            ("u:temperature", "degC"),
+            ("u:angle", "rad"),
+            ("y:current", "A"),
+            ("y:speed", "rad/s"),
+        ]
     }
 
     fn effects(&self) -> Vec<EffectSpec> {
