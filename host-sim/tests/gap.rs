@@ -260,6 +260,16 @@ fn bad_input_exits_2_and_says_which_and_where() {
         err.contains(&format!("{m}:3:30: unknown effect `warp_drive`")),
         "{err}"
     );
+    let text = "plant = \"dc_motor\"\ndt = 0.01\nsim_effects = [\"sensor_bias:speed\"]\n";
+    let (code, err) = bad(&dir, &good.csv, Some(text));
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(&format!(
+            "{m}:3:16: generic sensor effect (a model does not include it: correct the \
+             readings) `sensor_bias:speed`"
+        )),
+        "{err}"
+    );
 
     let text = "plant = \"dc_motor\"\ndt = 0.01\n[units]\n\"y:torque\" = \"N m\"\n";
     let (code, err) = bad(&dir, &good.csv, Some(text));

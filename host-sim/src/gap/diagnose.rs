@@ -4,7 +4,7 @@
 use crate::dataio::{Recording, read_recording};
 use crate::error::SimError;
 use crate::gap::analysis::{ALPHA, WhereReport, analyse};
-use crate::gap::effects::{Component, Evaluation, Problem, flat_values};
+use crate::gap::effects::{Component, Evaluation, GenericKind, Problem, flat_values};
 use crate::gap::meta::{GapMeta, read_gap_meta};
 use crate::gap::plant::{
     BUILTIN_PLANTS, GapPlant, InputTiming, PlantData, Simulation, builtin_plant,
@@ -195,10 +195,21 @@ pub fn diagnose_with(
     for e in &meta.sim_effects {
         if !catalogue.iter().any(|c| c.name == e.value) {
             let known: Vec<&str> = catalogue.iter().map(|c| c.name).collect();
+            let generic = e
+                .value
+                .split(':')
+                .next()
+                .and_then(GenericKind::from_name)
+                .is_some();
+            let what = if generic {
+                "generic sensor effect (a model does not include it: correct the readings)"
+            } else {
+                "unknown effect"
+            };
             return Err(meta.error_at(
                 e.offset,
                 format!(
-                    "unknown effect `{}` in sim_effects for plant `{}` (known: {})",
+                    "{what} `{}` in sim_effects for plant `{}` (known: {})",
                     e.value,
                     plant.name(),
                     known.join(", ")
