@@ -514,8 +514,17 @@ pub fn describe(plant: &dyn GapPlant) -> String {
 }
 
 /// The built-in plant called `name`.
+/// Case, blanks and `-` are folded (`Reaction-Wheel` is `reaction_wheel`).
 pub fn builtin_plant(name: &str) -> Option<Box<dyn GapPlant>> {
-    match name {
+    let folded: String = name
+        .trim()
+        .chars()
+        .map(|c| match c {
+            '-' | ' ' => '_',
+            c => c.to_ascii_lowercase(),
+        })
+        .collect();
+    match folded.as_str() {
         "reaction_wheel" => Some(Box::new(crate::gap::wheel::WheelGapPlant)),
         "dc_motor" => Some(Box::new(crate::gap::dc_motor::DcMotorPlant)),
         "valve" => Some(Box::new(crate::gap::valve::ValveGapPlant)),
@@ -526,3 +535,23 @@ pub fn builtin_plant(name: &str) -> Option<Box<dyn GapPlant>> {
 
 /// Names of the built-in plants (for error messages).
 pub const BUILTIN_PLANTS: &[&str] = &["reaction_wheel", "valve", "scooter", "dc_motor"];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plant_names_fold_case_blanks_and_hyphens() {
+        for name in [
+            "reaction_wheel",
+            "Reaction-Wheel",
+            " reaction wheel ",
+            "DC_Motor",
+        ] {
+            let plant = builtin_plant(name).expect(name);
+            assert!(BUILTIN_PLANTS.contains(&plant.name()), "{name}");
+        }
+        assert!(builtin_plant("toaster").is_none());
+        assert!(builtin_plant("reactionwheel").is_none());
+    }
+}
