@@ -1018,7 +1018,7 @@ fn in_other_units(csv: &str, units: &[(&str, &str, f64, f64)]) -> String {
 
 #[test]
 fn columns_in_other_units_are_converted_and_a_wrong_dimension_is_refused() {
-    // The same wheel record logged in rpm, mA, kelvin and degrees, its speed noise declared
+    // The same wheel record logged in ms, rpm, mA, kelvin and degrees, its speed noise declared
     // in rpm: read through `[units]`, the diagnosis is the SI one. Unread, the rpm are a
     // speed sensor scale of 9.5 and the verdict is off.
     let dir = scratch("units");
@@ -1031,6 +1031,7 @@ fn columns_in_other_units_are_converted_and_a_wrong_dimension_is_refused() {
     );
     let rpm = 60.0 / (2.0 * std::f64::consts::PI);
     let units = [
+        ("t", "ms", 1e3, 0.0),
         ("y:speed", "rpm", rpm, 0.0),
         ("y:current", "mA", 1e3, 0.0),
         ("u:temperature", "K", 1.0, 273.15),
@@ -1082,9 +1083,22 @@ fn columns_in_other_units_are_converted_and_a_wrong_dimension_is_refused() {
         warnings.contains("`y:speed` read in rpm and converted to rad/s"),
         "{warnings}"
     );
-    // Without `[units]` the rpm are taken for rad/s.
+    // Without `[units]` the ms are refused against `dt` and the rpm taken for rad/s.
     let meta = dir.join("unread.meta.toml");
     std::fs::write(&meta, &d.meta).unwrap();
+    let o = prognos(&[
+        "gap",
+        "--data",
+        s(&csv),
+        "--meta",
+        s(&meta),
+        "--out",
+        s(&dir.join("o")),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("`dt` = 0.05 but the samples"));
+    let csv = dir.join("logged-in-s.csv");
+    std::fs::write(&csv, in_other_units(&d.csv, &units[1..])).unwrap();
     let v = gap_with_meta(&csv, &meta, &dir.join("out-unread"));
     assert_ne!(v["verdict"], si["verdict"]);
     // A unit of another dimension is refused at its line; an unknown one is read as the

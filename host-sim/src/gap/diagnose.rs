@@ -284,9 +284,13 @@ pub fn diagnose_with(
             ),
         });
     }
-    let t = recording.series.column("t").unwrap_or_default();
+    let mut warnings = meta.warnings.clone();
+    warnings.extend(unused_columns(plant, recording, csv_path));
+    let mut read = plant_data(recording, f64::NAN);
+    read.initial_window = plant.initial_window();
+    let unit_scales = convert_units(plant, meta, &mut read, &mut warnings)?;
     let measured_dt =
-        crate::gap::stats::median(&t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
+        crate::gap::stats::median(&read.t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
             .unwrap_or(f64::NAN);
     let dt = meta.dt.unwrap_or(measured_dt);
     if (measured_dt - dt).abs() > 0.1 * dt {
@@ -300,11 +304,7 @@ pub fn diagnose_with(
             ),
         });
     }
-    let mut warnings = meta.warnings.clone();
-    warnings.extend(unused_columns(plant, recording, csv_path));
-    let mut read = plant_data(recording, dt);
-    read.initial_window = plant.initial_window();
-    let unit_scales = convert_units(plant, meta, &mut read, &mut warnings)?;
+    read.dt = dt;
     let timings: Vec<InputTiming> = match &meta.input_timing {
         Some(v) if v.value != "auto" => {
             vec![InputTiming::from_name(&v.value).ok_or_else(|| {
@@ -572,8 +572,13 @@ fn convert_units(
 ) -> Result<BTreeMap<String, f64>, SimError> {
     let mut scales = BTreeMap::new();
     for (column, given) in &meta.units {
-        let Some(wanted) = plant.unit_of(column) else {
-            continue;
+        let wanted = if column == "t" {
+            "s"
+        } else {
+            let Some(wanted) = plant.unit_of(column) else {
+                continue;
+            };
+            wanted
         };
         let at = |message: String| meta.error_at(given.offset, message);
         match conversion(&given.value, wanted) {
@@ -584,6 +589,7 @@ fn convert_units(
                 let series = match column.split_once(':') {
                     Some(("u", name)) => data.inputs.get_mut(name),
                     Some(("y", name)) => data.outputs.get_mut(name),
+                    _ if column == "t" => Some(&mut data.t),
                     _ => None,
                 };
                 for x in series.into_iter().flatten() {
