@@ -1131,3 +1131,35 @@ fn columns_in_other_units_are_converted_and_a_wrong_dimension_is_refused() {
         v["warnings"]
     );
 }
+
+#[test]
+fn an_output_column_without_a_reading_is_left_out_with_a_warning() {
+    // A preparer's table has every channel's column, an absent sensor's left empty.
+    let dir = scratch("empty-column");
+    let mut d = one("dc_motor", "coulomb_friction", 4.0);
+    let original = d.csv.clone();
+    let mut lines = original.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let current = header.iter().position(|h| *h == "y:current").unwrap();
+    let mut csv = header.join(",") + "\n";
+    for line in lines {
+        let mut cells: Vec<&str> = line.split(',').collect();
+        cells[current] = "";
+        csv.push_str(&(cells.join(",") + "\n"));
+    }
+    d.csv = csv;
+    let (out, v) = diagnose(&dir, &d);
+    let noise = v["noise"].as_array().unwrap();
+    assert_eq!(noise.len(), 1, "{noise:?}");
+    assert_eq!(noise[0]["channel"], "y:speed");
+    let column = 1 + header[..current].iter().map(|h| h.len() + 1).sum::<usize>();
+    let data = out.parent().unwrap().join("data.csv");
+    assert!(
+        v["warnings"].to_string().contains(&format!(
+            "{}:1:{column}: column `y:current` holds no reading and is left out",
+            s(&data)
+        )),
+        "{}",
+        v["warnings"]
+    );
+}

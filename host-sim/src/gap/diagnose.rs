@@ -252,11 +252,29 @@ pub fn diagnose_with(
         }
     }
     let plant_outputs = plant.outputs();
+    // A column without a single reading (a sensor the record does not have) is left out.
+    let has_reading = |o: &str| {
+        recording
+            .series
+            .column(&format!("y:{o}"))
+            .is_some_and(|c| c.iter().any(|v| v.is_finite()))
+    };
     let present: Vec<(usize, String)> = plant_outputs
         .iter()
         .enumerate()
-        .filter(|(_, o)| recording.measurements.iter().any(|m| m == *o))
+        .filter(|(_, o)| recording.measurements.iter().any(|m| m == *o) && has_reading(o))
         .map(|(i, o)| (i, o.to_string()))
+        .collect();
+    let unread_outputs: Vec<String> = plant_outputs
+        .iter()
+        .filter(|o| recording.measurements.iter().any(|m| m == *o) && !has_reading(o))
+        .map(|o| {
+            format!(
+                "{}:1:{}: column `y:{o}` holds no reading and is left out",
+                csv_path.display(),
+                header_column(recording, &format!("y:{o}"))
+            )
+        })
         .collect();
     if present.is_empty() {
         return Err(header_error(
@@ -286,6 +304,7 @@ pub fn diagnose_with(
     }
     let mut warnings = meta.warnings.clone();
     warnings.extend(unused_columns(plant, recording, csv_path));
+    warnings.extend(unread_outputs);
     let mut read = plant_data(recording, f64::NAN);
     read.initial_window = plant.initial_window();
     let unit_scales = convert_units(plant, meta, &mut read, &mut warnings)?;
@@ -651,12 +670,7 @@ fn unused_columns(plant: &dyn GapPlant, recording: &Recording, csv_path: &Path) 
         .iter()
         .filter(|y| !outputs.contains(&y.as_str()))
         .map(|y| format!("y:{y}"));
-    // Column of a header cell, counting the cells and commas before it.
-    let column = |name: &str| -> usize {
-        let header = &recording.series.header;
-        let i = header.iter().position(|h| h == name).unwrap_or(0);
-        1 + header[..i].iter().map(|h| h.len() + 1).sum::<usize>()
-    };
+    let column = |name: &str| header_column(recording, name);
     unread_inputs
         .chain(unread_outputs)
         .map(|c| {
@@ -674,6 +688,13 @@ fn unused_columns(plant: &dyn GapPlant, recording: &Recording, csv_path: &Path) 
             )
         })
         .collect()
+}
+
+/// Column of header cell `name`, counting the cells and commas before it.
+fn header_column(recording: &Recording, name: &str) -> usize {
+    let header = &recording.series.header;
+    let i = header.iter().position(|h| h == name).unwrap_or(0);
+    1 + header[..i].iter().map(|h| h.len() + 1).sum::<usize>()
 }
 
 /// The step of the lattice `y` lies on ([`crate::gap::effects::lattice_step`]) when over
