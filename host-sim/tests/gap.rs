@@ -1163,3 +1163,32 @@ fn an_output_column_without_a_reading_is_left_out_with_a_warning() {
         v["warnings"]
     );
 }
+
+#[test]
+fn an_effect_in_a_record_of_another_timing_is_diagnosed_under_both() {
+    // A wheel whose current shows its row's command (`at`) and whose viscous coefficient
+    // falls with temperature: `at` fits the user's model better, but by far less than half
+    // its gap, as any shift of a model far off might (progpy's leaking valve). Diagnosed under
+    // both timings, `at`'s best explanation leaves the smaller held-out gap.
+    let opts = BenchOptions {
+        plants: vec!["reaction_wheel".into()],
+        seeds: 1,
+        ratios: vec![4.0],
+        seed: 2026,
+        only: vec!["viscous_temperature".into()],
+        extra_sets: 0,
+        input_timing: InputTiming::At,
+        ..BenchOptions::default()
+    };
+    let d = generate("reaction_wheel", &opts).unwrap().remove(0);
+    let (_, v) = diagnose(&scratch("contested"), &d);
+    assert_eq!(v["verdict"], "viscous_temperature", "{:#}", v["ranking"][0]);
+    let timing = &v["input_timing"];
+    assert_eq!(timing["timing"], "at", "{timing:#}");
+    let left = timing["gap_left"].as_array().unwrap();
+    assert_eq!((&left[0][0], &left[1][0]), (&"before".into(), &"at".into()));
+    assert!(
+        left[1][1].as_f64().unwrap() < 0.5 * left[0][1].as_f64().unwrap(),
+        "{timing:#}"
+    );
+}
