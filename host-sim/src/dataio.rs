@@ -239,6 +239,11 @@ fn parse_header(
             .map_err(|_| bad(field_offset(i), "header cell is not UTF-8".into()))?
             .trim()
             .to_string();
+        // numpy's `savetxt(header=...)` writes the header as a comment, `# t,...`.
+        let name = match name.strip_prefix('#') {
+            Some(rest) if i == 0 => rest.trim().to_string(),
+            _ => name,
+        };
         if i == 0 {
             if name != "t" {
                 return Err(bad(
@@ -399,6 +404,18 @@ mod tests {
         assert_eq!(rec.series.rows.len(), 3);
         assert_eq!(rec.series.column("x:leak").unwrap(), vec![0.0, 1e-3, 2e-3]);
         assert!(rec.series.rows[1][2].is_nan());
+    }
+
+    #[test]
+    fn a_header_written_as_a_comment_is_read() {
+        // numpy.savetxt(..., header="t,u:cmd,y:p", delimiter=",") with its default comments.
+        let rec = parse_recording(p(), "# t,u:cmd,y:p\n0,1,2.5\n0.5,1,2.0\n").unwrap();
+        assert_eq!(rec.series.header, vec!["t", "u:cmd", "y:p"]);
+        assert_eq!(rec.series.rows[1], vec![0.5, 1.0, 2.0]);
+        let (line, column, message) =
+            location(parse_recording(p(), "# time,y:p\n0,1\n").unwrap_err());
+        assert_eq!((line, column), (1, 1));
+        assert!(message.contains("found `time`"), "{message}");
     }
 
     #[test]
