@@ -239,10 +239,13 @@ fn parse_header(
             .map_err(|_| bad(field_offset(i), "header cell is not UTF-8".into()))?
             .trim()
             .to_string();
-        // numpy's `savetxt(header=...)` writes the header as a comment, `# t,...`.
-        let name = match name.strip_prefix('#') {
-            Some(rest) if i == 0 => rest.trim().to_string(),
-            _ => name,
+        // A spreadsheet's UTF-8 byte-order mark, and numpy's `savetxt(header=...)`, which
+        // writes the header as a comment (`# t,...`), come before the first cell.
+        let name = if i == 0 {
+            let name = name.trim_start_matches('\u{feff}');
+            name.strip_prefix('#').unwrap_or(name).trim().to_string()
+        } else {
+            name
         };
         if i == 0 {
             if name != "t" {
@@ -407,11 +410,13 @@ mod tests {
     }
 
     #[test]
-    fn a_header_written_as_a_comment_is_read() {
+    fn a_header_written_as_a_comment_or_after_a_byte_order_mark_is_read() {
         // numpy.savetxt(..., header="t,u:cmd,y:p", delimiter=",") with its default comments.
         let rec = parse_recording(p(), "# t,u:cmd,y:p\n0,1,2.5\n0.5,1,2.0\n").unwrap();
         assert_eq!(rec.series.header, vec!["t", "u:cmd", "y:p"]);
         assert_eq!(rec.series.rows[1], vec![0.5, 1.0, 2.0]);
+        let rec = parse_recording(p(), "\u{feff}t,y:p\n0,1\n").unwrap();
+        assert_eq!(rec.series.header, vec!["t", "y:p"]);
         let (line, column, message) =
             location(parse_recording(p(), "# time,y:p\n0,1\n").unwrap_err());
         assert_eq!((line, column), (1, 1));
