@@ -196,9 +196,10 @@ pub enum Command {
         sample_time_scale: f64,
         /// How the written rows relate inputs and samples: `before` (the row's input acts
         /// after its sample), `at` (outputs that follow the input at once show it) or
-        /// `after` (the row's input acted over the step ending at its sample).
-        #[arg(long, value_enum, default_value_t = crate::gap::plant::InputTiming::Before)]
-        input_timing: crate::gap::plant::InputTiming,
+        /// `after` (the row's input acted over the step ending at its sample) [default:
+        /// each plant's own: `after` for the valve, as progpy writes, else `before`].
+        #[arg(long, value_enum)]
+        input_timing: Option<crate::gap::plant::InputTiming>,
         /// Diagnose the labelled datasets in this folder instead of generating.
         #[arg(long)]
         datasets: Option<PathBuf>,

@@ -934,7 +934,7 @@ fn none_set(plant: &str, input_timing: InputTiming) -> Dataset {
         seed: 5,
         only: vec!["no-such-effect".into()],
         extra_sets: 1,
-        input_timing,
+        input_timing: Some(input_timing),
         ..BenchOptions::default()
     };
     generate(plant, &opts)
@@ -948,12 +948,14 @@ fn none_set(plant: &str, input_timing: InputTiming) -> Dataset {
 fn records_of_other_input_timings_are_read_as_they_were_written() {
     // Rows that show the input acting over the step ending at them (the lockstep runner's
     // log), or a wheel current that already follows the row's command (y_k = C x_k + D u_k),
-    // were replayed one row off: each of these `none` sets was `unknown`.
+    // were replayed one row off: each of these `none` sets was `unknown`. The valve replays
+    // progpy's rows (`after`); a textbook loop's (`before`) was one row off the other way.
     let dir = scratch("timing");
     for (plant, timing, name) in [
         ("reaction_wheel", InputTiming::At, "at"),
         ("reaction_wheel", InputTiming::After, "after"),
         ("valve", InputTiming::After, "after"),
+        ("valve", InputTiming::Before, "before"),
         ("dc_motor", InputTiming::After, "after"),
         ("scooter", InputTiming::Before, "before"),
     ] {
@@ -1177,7 +1179,7 @@ fn an_effect_in_a_record_of_another_timing_is_diagnosed_under_both() {
         seed: 2026,
         only: vec!["viscous_temperature".into()],
         extra_sets: 0,
-        input_timing: InputTiming::At,
+        input_timing: Some(InputTiming::At),
         ..BenchOptions::default()
     };
     let d = generate("reaction_wheel", &opts).unwrap().remove(0);

@@ -268,8 +268,9 @@ pub struct BenchOptions {
     /// The sample time is the bench's default times this, the record as long as by
     /// default (more or fewer samples).
     pub sample_time_scale: f64,
-    /// How the written rows relate inputs and samples (the diagnoser is not told).
-    pub input_timing: InputTiming,
+    /// How the written rows relate inputs and samples (the diagnoser is not told); `None`:
+    /// each plant's own ([`GapPlant::native_timing`]).
+    pub input_timing: Option<InputTiming>,
 }
 
 /// What a bench plant varies from the bench's defaults.
@@ -279,7 +280,7 @@ struct Variation {
     model_spread: f64,
     noise_scale: f64,
     sample_time_scale: f64,
-    input_timing: InputTiming,
+    input_timing: Option<InputTiming>,
 }
 
 impl Default for Variation {
@@ -289,7 +290,7 @@ impl Default for Variation {
             model_spread: 0.0,
             noise_scale: 1.0,
             sample_time_scale: 1.0,
-            input_timing: InputTiming::Before,
+            input_timing: None,
         }
     }
 }
@@ -351,7 +352,7 @@ impl Default for BenchOptions {
             model_spread: 0.0,
             noise_scale: 1.0,
             sample_time_scale: 1.0,
-            input_timing: InputTiming::Before,
+            input_timing: None,
         }
     }
 }
@@ -573,7 +574,7 @@ impl BenchPlant for WheelBench {
         let inertia = wheel.params.inertia;
         let omega_d = std::f64::consts::TAU * 0.7;
         let current_at_row =
-            self.vary.input_timing == InputTiming::At && !wheel.effects.driver_lowpass;
+            self.vary.input_timing == Some(InputTiming::At) && !wheel.effects.driver_lowpass;
         for k in 0..n {
             current.push(if current_at_row {
                 wheel.current_following(command[k])
@@ -1143,10 +1144,10 @@ fn visible_reference(bp: &dyn BenchPlant, seed: u64, clean: &Clean) -> Option<Ve
         // The clean run's own first sample: a window fit would be off by the curvature of
         // a record that starts in a transient.
         initial_window: 0.0,
-        // `After` rows are written from a `Before` run (see `dataset`).
+        // Other timings are written from a run in the plant's own (see `dataset`).
         input_timing: match bp.variation().input_timing {
-            InputTiming::At => InputTiming::At,
-            _ => InputTiming::Before,
+            Some(InputTiming::At) => InputTiming::At,
+            _ => plant.native_timing(),
         },
         ..Default::default()
     };
@@ -1267,15 +1268,17 @@ fn dataset(bp: &dyn BenchPlant, name: String, seed: u64, spec: &Spec, label: Lab
         .collect();
     let mut clean = bp.clean(seed, &effects);
     let measured = noisy(bp, &clean, spec, seed);
-    if bp.variation().input_timing == InputTiming::After {
-        // Each row shows the input that acted over the step ending at it.
-        let sampled = crate::gap::plant::builtin_plant(bp.plant())
-            .map(|p| p.sampled_inputs())
-            .unwrap_or_default();
+    if let (Some(timing), Some(plant)) = (
+        bp.variation().input_timing,
+        crate::gap::plant::builtin_plant(bp.plant()),
+    ) {
+        // The run is in the plant's own timing; `after` rows show the input that acted over
+        // the step ending at them, `before` rows the one acting from them on.
+        let sampled = plant.sampled_inputs();
+        let rows = timing.rows_late() - plant.native_timing().rows_late();
         for (name, u) in clean.inputs.iter_mut() {
-            if !sampled.contains(&name.as_str()) && !u.is_empty() {
-                u.pop();
-                u.insert(0, u[0]);
+            if !sampled.contains(&name.as_str()) {
+                crate::gap::plant::shift_rows(u, rows);
             }
         }
     }

@@ -359,15 +359,21 @@ fn diagnose_timed(
                 )
             })?]
         }
-        _ => InputTiming::ALL
-            .into_iter()
+        _ => std::iter::once(plant.native_timing())
+            .chain(InputTiming::ALL)
             .filter(|t| *t != InputTiming::At || plant.feedthrough())
-            .collect(),
+            .fold(Vec::new(), |mut v, t| {
+                if !v.contains(&t) {
+                    v.push(t);
+                }
+                v
+            }),
     };
     let sampled = plant.sampled_inputs();
+    let native = plant.native_timing();
     let readings: Vec<PlantData> = timings
         .iter()
-        .map(|t| read.with_timing(*t, &sampled))
+        .map(|t| read.with_timing(*t, native, &sampled))
         .collect();
     let data = &readings[0];
     let train: Vec<bool> = (0..n).map(|k| (k * BLOCKS / n).is_multiple_of(2)).collect();

@@ -111,9 +111,9 @@ impl EffectSpec {
 }
 
 /// When a row's sample is taken relative to the row's input: the three conventions a
-/// record may follow. Plants replay `Before`; [`PlantData::with_timing`] moves `After`
-/// records onto it, and a plant with direct feedthrough ([`GapPlant::feedthrough`]) reads
-/// `At` itself.
+/// record may follow. A plant replays its [`GapPlant::native_timing`] (`Before`, the
+/// valve's `After`); [`PlantData::with_timing`] moves records of the other onto it, and a
+/// plant with direct feedthrough ([`GapPlant::feedthrough`]) reads `At` itself.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum InputTiming {
@@ -147,6 +147,28 @@ impl InputTiming {
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|t| t.name() == name)
     }
+
+    /// Rows by which a held input is written later than under `Before`.
+    pub fn rows_late(self) -> isize {
+        match self {
+            InputTiming::Before | InputTiming::At => 0,
+            InputTiming::After => 1,
+        }
+    }
+}
+
+/// `u` written `rows` rows later (`rows` < 0: earlier), the end rows keeping their own.
+pub fn shift_rows(u: &mut Vec<f64>, rows: isize) {
+    if u.len() < 2 {
+        return;
+    }
+    if rows > 0 {
+        u.pop();
+        u.insert(0, u[0]);
+    } else if rows < 0 {
+        u.remove(0);
+        u.push(u[u.len() - 1]);
+    }
 }
 
 /// Recorded data as the plant sees it: time, inputs by name, measurements by name (NaN =
@@ -169,8 +191,8 @@ pub struct PlantData {
     /// Offsets added to [`PlantData::first_output`] (the diagnoser perturbs the initial
     /// condition with them to measure its effect on the replay).
     pub initial_offsets: BTreeMap<String, f64>,
-    /// How the rows relate inputs and samples; after [`PlantData::with_timing`] only
-    /// `Before` or `At`.
+    /// How the rows relate inputs and samples; after [`PlantData::with_timing`] the
+    /// plant's native timing, or `At`.
     pub input_timing: InputTiming,
 }
 
@@ -190,20 +212,26 @@ impl PlantData {
         self.inputs.get(name).map(Vec::as_slice)
     }
 
-    /// The data as a plant replays them under `timing`: for `After` every held input
-    /// (those not in `sampled`, the readings taken at the sample time such as a measured
-    /// angle) moves one row earlier, so that row k holds the input acting from t_k on; the
-    /// last row keeps its own.
-    pub fn with_timing(&self, timing: InputTiming, sampled: &[&str]) -> PlantData {
+    /// The data, written under `timing`, as a plant whose replay reads `native` sees them:
+    /// every held input (those not in `sampled`, the readings taken at the sample time such
+    /// as a measured angle) moves by the rows between the two (a lockstep log read by a
+    /// `before` replay: one row earlier, so that row k holds the input acting from t_k on).
+    pub fn with_timing(
+        &self,
+        timing: InputTiming,
+        native: InputTiming,
+        sampled: &[&str],
+    ) -> PlantData {
         let mut data = self.clone();
-        data.input_timing = timing;
-        if timing == InputTiming::After {
-            data.input_timing = InputTiming::Before;
-            for (name, u) in data.inputs.iter_mut() {
-                if !sampled.contains(&name.as_str()) && u.len() > 1 {
-                    u.remove(0);
-                    u.push(u[u.len() - 1]);
-                }
+        data.input_timing = if timing == InputTiming::At {
+            InputTiming::At
+        } else {
+            native
+        };
+        let rows = native.rows_late() - timing.rows_late();
+        for (name, u) in data.inputs.iter_mut() {
+            if !sampled.contains(&name.as_str()) {
+                shift_rows(u, rows);
             }
         }
         data
@@ -405,6 +433,12 @@ pub trait GapPlant: Sync {
         false
     }
 
+    /// The timing `simulate` reads rows in (the valve's, as progpy writes: `After`); a
+    /// record is read in it first.
+    fn native_timing(&self) -> InputTiming {
+        InputTiming::Before
+    }
+
     /// Inputs that are readings taken at the sample time (a measured angle), not commands
     /// held over the step: [`PlantData::with_timing`] leaves them in their rows.
     fn sampled_inputs(&self) -> Vec<&'static str> {
@@ -458,7 +492,8 @@ pub fn describe(plant: &dyn GapPlant) -> String {
         .map(|(u, why)| format!("{} ({why})", column(format!("u:{u}"))))
         .collect();
     s.push_str(&format!(
-        "- required inputs: {}\n- optional inputs: {}\n- outputs: {}\n\n",
+        "- required inputs: {}\n- optional inputs: {}\n- outputs: {}\n- rows read first \
+         as `input_timing = \"{}\"`\n\n",
         list(
             plant
                 .required_inputs()
@@ -477,7 +512,8 @@ pub fn describe(plant: &dyn GapPlant) -> String {
                 .iter()
                 .map(|y| column(format!("y:{y}")))
                 .collect()
-        )
+        ),
+        plant.native_timing().name()
     ));
     s.push_str("| `[model]` parameter | default | meaning |\n|---|---|---|\n");
     for p in plant.parameters() {

@@ -18,7 +18,8 @@
 //! lower.
 
 use crate::gap::plant::{
-    EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Side, Simulation, param,
+    EffectSpec, GapPlant, InputTiming, ParamSpec, Params, PlantData, Regime, Scale, Side,
+    Simulation, param,
 };
 use nalgebra::SVector;
 use prognos_core::plants::valve::{Choking, Contact, Integrator, NU, NX, ValveParams, idx};
@@ -289,6 +290,12 @@ impl GapPlant for ValveGapPlant {
 
     fn outputs(&self) -> Vec<&'static str> {
         vec!["x", "pt", "pb", "q"]
+    }
+
+    fn native_timing(&self) -> InputTiming {
+        // progpy's simulate_to saves with each time the input that acted over the step
+        // ending at it; the replay reads it so.
+        InputTiming::After
     }
 
     fn units(&self) -> Vec<(&'static str, &'static str)> {
