@@ -465,27 +465,7 @@ fn diagnose_timed(
     };
     problem.refit_nominal();
     let timing = choose_timing(&mut problem, &timings, &readings);
-    if let Some(contested) = timing.contested {
-        // The model's fit alone does not decide: the timing whose best explanation leaves
-        // the smaller held-out gap does (a tenth smaller to leave `before`).
-        let first = diagnose_timed(plant, csv_path, recording, meta, Some(timing.timing))?;
-        let left_first = gap_left(&first);
-        // Should the other reading fail, the first stands.
-        let other = diagnose_timed(plant, csv_path, recording, meta, Some(contested)).ok();
-        let left_other = other.as_ref().map_or(f64::INFINITY, gap_left);
-        let mut chosen = match other {
-            Some(other) if left_other < 0.9 * left_first => other,
-            _ => first,
-        };
-        chosen.input_timing = TimingChoice {
-            timing: chosen.input_timing.timing,
-            source: "data",
-            chi2: timing.chi2,
-            contested: None,
-            gap_left: vec![(timing.timing, left_first), (contested, left_other)],
-        };
-        return Ok(chosen);
-    }
+    let contested = timing.contested;
     refine_noise_from_residuals(&mut problem, &mut noise);
     let mut report = analyse(&problem);
     let (mut verdict, mut ranking, mut pairs) = decide(&problem, &report);
@@ -554,7 +534,7 @@ fn diagnose_timed(
     }
     let confusable = chosen.map_or_else(Vec::new, |v| confusable_with(v, &ranking, &pairs));
     let overlays = overlays(&problem, &report, chosen);
-    Ok(Diagnosis {
+    let diagnosis = Diagnosis {
         plant: plant.name().to_string(),
         verdict,
         location: report.location.clone(),
@@ -576,7 +556,41 @@ fn diagnose_timed(
         overlays,
         nominal_rss: problem.rss_split(&problem.nominal),
         warnings,
+    };
+    Ok(match contested {
+        Some(other) => settle_contest(diagnosis, other, plant, csv_path, recording, meta),
+        None => diagnosis,
     })
+}
+
+/// The model's fit alone did not decide between the timing `first` was read in and
+/// `contested`: the record is diagnosed under `contested` too, and the reading whose best
+/// explanation leaves the smaller held-out gap (a tenth smaller, to leave the first) is kept.
+fn settle_contest(
+    first: Diagnosis,
+    contested: InputTiming,
+    plant: &dyn GapPlant,
+    csv_path: &Path,
+    recording: &Recording,
+    meta: &GapMeta,
+) -> Diagnosis {
+    let first_timing = first.input_timing.clone();
+    let left_first = gap_left(&first);
+    // Should the other reading fail, the first stands.
+    let other = diagnose_timed(plant, csv_path, recording, meta, Some(contested)).ok();
+    let left_other = other.as_ref().map_or(f64::INFINITY, gap_left);
+    let mut chosen = match other {
+        Some(other) if left_other < 0.9 * left_first => other,
+        _ => first,
+    };
+    chosen.input_timing = TimingChoice {
+        timing: chosen.input_timing.timing,
+        source: "data",
+        chi2: first_timing.chi2,
+        contested: None,
+        gap_left: vec![(first_timing.timing, left_first), (contested, left_other)],
+    };
+    chosen
 }
 
 /// How the record's rows relate inputs and samples, and the evidence.
