@@ -200,6 +200,11 @@ pub enum Command {
         /// each plant's own: `after` for the valve, as progpy writes, else `before`].
         #[arg(long, value_enum)]
         input_timing: Option<crate::gap::plant::InputTiming>,
+        /// Write the truth plant's states as `x:<name>` columns: the diagnosis then runs
+        /// the plant's estimator with the user's model and with the verdict's effect, and
+        /// the bench reports the median ratio of their errors.
+        #[arg(long)]
+        truth_columns: bool,
         /// Diagnose the labelled datasets in this folder instead of generating.
         #[arg(long)]
         datasets: Option<PathBuf>,
@@ -537,6 +542,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             noise_scale,
             sample_time_scale,
             input_timing,
+            truth_columns,
             datasets,
             write_datasets,
             out,
@@ -553,6 +559,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 noise_scale,
                 sample_time_scale,
                 input_timing,
+                truth_columns,
             };
             let started = Instant::now();
             let (_, text) = crate::gap::bench::run_bench(

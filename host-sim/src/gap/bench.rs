@@ -167,6 +167,11 @@ pub struct Outcome {
     pub input_timing: String,
     /// Held-out shrink of the verdict's effect (0 for none / unknown).
     pub shrink: f64,
+    /// The plant's estimator's error against the truth columns with the user's model and
+    /// with the verdict's effect added (when the record has truth columns and the plant an
+    /// estimator).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub estimation_error: Option<[f64; 2]>,
     /// Candidates the held-out data do not separate from the verdict.
     pub confusable: Vec<String>,
     /// Every single and pair candidate, for offline study of the ranking (`bench.json`).
@@ -271,6 +276,9 @@ pub struct BenchOptions {
     /// How the written rows relate inputs and samples (the diagnoser is not told); `None`:
     /// each plant's own ([`GapPlant::native_timing`]).
     pub input_timing: Option<InputTiming>,
+    /// Write the truth plant's states as `x:<name>` columns (the diagnosis then reports the
+    /// estimator's error before and after, and the bench its median ratio).
+    pub truth_columns: bool,
 }
 
 /// What a bench plant varies from the bench's defaults.
@@ -281,6 +289,7 @@ struct Variation {
     noise_scale: f64,
     sample_time_scale: f64,
     input_timing: Option<InputTiming>,
+    truth_columns: bool,
 }
 
 impl Default for Variation {
@@ -291,6 +300,7 @@ impl Default for Variation {
             noise_scale: 1.0,
             sample_time_scale: 1.0,
             input_timing: None,
+            truth_columns: false,
         }
     }
 }
@@ -353,16 +363,19 @@ impl Default for BenchOptions {
             noise_scale: 1.0,
             sample_time_scale: 1.0,
             input_timing: None,
+            truth_columns: false,
         }
     }
 }
 
-/// Noise-free run of a truth plant: time, inputs and the measured channels.
+/// Noise-free run of a truth plant: time, inputs, the measured channels and the states a
+/// record's truth columns `x:<name>` hold.
 #[derive(Clone, Debug)]
 struct Clean {
     t: Vec<f64>,
     inputs: Vec<(String, Vec<f64>)>,
     outputs: Vec<Vec<f64>>,
+    states: Vec<(String, Vec<f64>)>,
 }
 
 /// A truth plant the bench can generate from.
@@ -605,6 +618,7 @@ impl BenchPlant for WheelBench {
                 ("temperature".into(), temperature),
                 ("angle".into(), angle),
             ],
+            states: vec![("current".into(), current.clone()), ("speed".into(), speed.clone())],
             outputs: vec![current, speed],
         }
     }
@@ -706,6 +720,7 @@ impl BenchPlant for MotorBench {
             t: data.t.clone(),
             inputs: data.inputs.into_iter().collect(),
             outputs: sim.outputs,
+            states: sim.states.into_iter().collect(),
         }
     }
 }
@@ -841,6 +856,7 @@ impl BenchPlant for ValveBench {
             t: data.t.clone(),
             inputs: data.inputs.into_iter().collect(),
             outputs: sim.outputs,
+            states: sim.states.into_iter().collect(),
         }
     }
 }
@@ -945,10 +961,16 @@ impl BenchPlant for ScooterBench {
         let half = 0.5 * n as f64 * dt;
         let force = move |t: f64| ripple * (omega * t).sin() - if t >= half { grade } else { 0.0 };
         let sim = simulate_scooter(&params, &data, 4, &force).unwrap_or_default();
+        let mut states: Vec<(String, Vec<f64>)> = sim.states.into_iter().collect();
+        // The fault parameters the scooter's estimator tracks, constant in the truth.
+        for (name, _) in crate::gap::scooter::ESTIMATED_PARAMETERS {
+            states.push((name.to_string(), vec![params[name]; n]));
+        }
         Clean {
             t: data.t.clone(),
             inputs: data.inputs.into_iter().collect(),
             outputs: sim.outputs,
+            states,
         }
     }
 }
@@ -1058,14 +1080,21 @@ fn noisy(bp: &dyn BenchPlant, clean: &Clean, spec: &Spec, seed: u64) -> Vec<Vec<
 }
 
 fn to_csv(bp: &dyn BenchPlant, clean: &Clean, measured: &[Vec<f64>]) -> String {
+    let truth: &[(String, Vec<f64>)] = if bp.variation().truth_columns {
+        &clean.states
+    } else {
+        &[]
+    };
     let mut header = vec!["t".to_string()];
     header.extend(clean.inputs.iter().map(|(n, _)| format!("u:{n}")));
     header.extend(bp.outputs().iter().map(|n| format!("y:{n}")));
+    header.extend(truth.iter().map(|(n, _)| format!("x:{n}")));
     let mut ts = TimeSeries::new(header);
     for k in 0..clean.t.len() {
         let mut row = vec![clean.t[k]];
         row.extend(clean.inputs.iter().map(|(_, v)| v[k]));
         row.extend(measured.iter().map(|v| v[k]));
+        row.extend(truth.iter().map(|(_, v)| v.get(k).copied().unwrap_or(f64::NAN)));
         ts.rows.push(row);
     }
     let mut buf = Vec::new();
@@ -1310,6 +1339,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
         noise_scale: opts.noise_scale,
         sample_time_scale: opts.sample_time_scale,
         input_timing: opts.input_timing,
+        truth_columns: opts.truth_columns,
     };
     let bp = bench_plant(plant, vary)
         .ok_or_else(|| SimError::Run(format!("gap-bench has no generator for plant `{plant}`")))?;
@@ -1497,12 +1527,15 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
     let recording: Recording = parse_recording(&csv_path, &d.csv)?;
     let meta = parse_gap_meta(&meta_path, &d.meta)?;
     let diag = diagnose_recording(&csv_path, &recording, &meta)?;
-    let shrink = diag
+    let chosen = diag
         .ranking
         .iter()
         .chain(&diag.pairs)
-        .find(|e| e.effect == diag.verdict)
-        .map_or(0.0, |e| e.shrink);
+        .find(|e| e.effect == diag.verdict);
+    let shrink = chosen.map_or(0.0, |e| e.shrink);
+    let estimation_error = chosen.and_then(|e| {
+        Some([e.estimation_error_before?, e.estimation_error_after?])
+    });
     Ok(Outcome {
         name: d.name.clone(),
         label: d.label.clone(),
@@ -1516,6 +1549,7 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
         channel: diag.location.channel.clone(),
         input_timing: diag.input_timing.timing.name().to_string(),
         shrink,
+        estimation_error,
         confusable: diag.confusable.iter().map(|c| c.effect.clone()).collect(),
         candidates: diag
             .ranking
@@ -1545,6 +1579,7 @@ pub fn outcome(d: &Dataset) -> Outcome {
         channel: String::new(),
         input_timing: String::new(),
         shrink: 0.0,
+        estimation_error: None,
         confusable: Vec::new(),
         candidates: Vec::new(),
         sigma: Vec::new(),
@@ -1683,6 +1718,12 @@ pub struct Scores {
     pub localisation: f64,
     /// Median held-out shrink of the verdict's effect.
     pub median_shrink: f64,
+    /// Single-effect datasets correctly attributed whose records have truth columns and
+    /// whose plant has an estimator.
+    pub estimated: usize,
+    /// Median over them of the estimator's error with the fitted effect over its error
+    /// with the user's model (below 1: the diagnosis improves the estimates).
+    pub median_estimation_ratio: f64,
     /// No-effect datasets.
     pub nones: usize,
     /// Fraction of no-effect datasets with a verdict other than `none`.
@@ -1724,6 +1765,13 @@ pub fn score(outcomes: &[Outcome], keep: impl Fn(f64) -> bool) -> Scores {
         .filter(|o| o.label.kind == CaseKind::Pair && keep(o.label.ratio))
         .collect();
     let shrinks: Vec<f64> = singles.iter().map(|o| o.shrink).collect();
+    let estimation_ratios: Vec<f64> = singles
+        .iter()
+        .filter(|o| o.top1())
+        .filter_map(|o| o.estimation_error)
+        .filter(|[before, _]| *before > 0.0)
+        .map(|[before, after]| after / before)
+        .collect();
     Scores {
         singles: singles.len(),
         top1: frac(&singles, Outcome::top1),
@@ -1748,6 +1796,9 @@ pub fn score(outcomes: &[Outcome], keep: impl Fn(f64) -> bool) -> Scores {
             Outcome::localised,
         ),
         median_shrink: crate::gap::stats::median(&shrinks).unwrap_or(f64::NAN),
+        estimated: estimation_ratios.len(),
+        median_estimation_ratio: crate::gap::stats::median(&estimation_ratios)
+            .unwrap_or(f64::NAN),
         nones: nones.len(),
         false_attribution: frac(&nones, |o| o.verdict != "none"),
         unknowns: unknowns.len(),
@@ -1810,7 +1861,7 @@ pub fn summary(outcomes: &[Outcome]) -> String {
             "Every labelled dataset (the labels give no effect-to-noise ratio):"
         }
     ));
-    let rows = vec![
+    let mut rows = vec![
         vec![
             "top-1 attribution".into(),
             pct(at2.top1),
@@ -1867,6 +1918,14 @@ pub fn summary(outcomes: &[Outcome]) -> String {
             at2.pairs.to_string(),
         ],
     ];
+    if at2.estimated > 0 {
+        rows.push(vec![
+            "estimator error, effect added / user's model (median, correct verdicts)".into(),
+            fixed3(at2.median_estimation_ratio),
+            "-".into(),
+            at2.estimated.to_string(),
+        ]);
+    }
     s.push_str(&format_table(
         &["metric", "measured", "target", "datasets"],
         &rows,

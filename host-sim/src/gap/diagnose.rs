@@ -521,6 +521,8 @@ fn diagnose_timed(
             held_out_blocks = "even (from 2)";
         }
     }
+    problem.add_estimation_errors(&mut ranking);
+    problem.add_estimation_errors(&mut pairs);
     let chosen = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
     if let Some(channel) = chosen.and_then(|e| signature_channel(&problem, e)) {
         // The gap lies where the explaining effect changes the model most, in noise units
@@ -961,6 +963,24 @@ impl GapPlant for SelectPlant<'_> {
     }
     fn initial_window(&self) -> f64 {
         self.inner.initial_window()
+    }
+    fn estimate(
+        &self,
+        params: &crate::gap::plant::Params,
+        active: &[&str],
+        data: &PlantData,
+        sensors: &crate::gap::estimate::Sensors,
+    ) -> Option<Result<std::collections::BTreeMap<String, Vec<f64>>, String>> {
+        // The estimator reads every output of the plant: the unmeasured ones never.
+        let mut all = crate::gap::estimate::Sensors {
+            channels: (0..self.inner.outputs().len())
+                .map(|_| crate::gap::estimate::ChannelSensor::absent(data.len()))
+                .collect(),
+        };
+        for (sensor, &i) in sensors.channels.iter().zip(&self.select) {
+            all.channels[i] = sensor.clone();
+        }
+        self.inner.estimate(params, active, data, &all)
     }
     fn model_effects(&self, params: &crate::gap::plant::Params) -> Vec<&'static str> {
         self.inner.model_effects(params)

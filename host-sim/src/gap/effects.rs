@@ -10,12 +10,14 @@
 //! method would stall. Scores are held-out Gaussian log-likelihoods (per-channel variance
 //! from the training residuals) minus `k/2 ln n_train` (BIC-like).
 
+use crate::gap::estimate::{ChannelSensor, Sensors};
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use crate::gap::start::{StartSensitivity, refit_start, start_sensitivities};
 use crate::gap::stats::{holm, variance_ratio_p};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// A fitted quantiser on one channel: its `(step, offset)` and its input, the candidate's
 /// replay of that channel without the quantiser.
@@ -331,10 +333,16 @@ pub struct Evaluation {
     pub gap_after: f64,
     /// `1 - gap_after / gap_before`.
     pub shrink: f64,
-    /// RMS error of the replayed states against the truth columns (held-out), before.
-    pub truth_error_before: Option<f64>,
+    /// RMS error of the open-loop replay's states against the truth columns (held-out,
+    /// each column in units of its own std), with the user's model.
+    pub replay_error_before: Option<f64>,
     /// The same with the fitted effect.
-    pub truth_error_after: Option<f64>,
+    pub replay_error_after: Option<f64>,
+    /// The same for the plant's estimator ([`GapPlant::estimate`], closed loop on the
+    /// measurements) with the user's model and sensors.
+    pub estimation_error_before: Option<f64>,
+    /// The estimator's error with the fitted effect in its model and sensors.
+    pub estimation_error_after: Option<f64>,
     /// Holm-adjusted p-value of the held-out block (and channel) whose residual variance
     /// exceeds the noise the most (see [`Problem::worst_block_p`]).
     pub worst_block_p: f64,
@@ -510,20 +518,73 @@ impl<'a> Problem<'a> {
         let raw = if plant_parts.is_empty() {
             self.nominal_raw.clone()
         } else {
-            let mut params = self.base.clone();
-            let mut active: Vec<&str> = self.sim_effects.iter().map(String::as_str).collect();
-            for (c, values) in &plant_parts {
-                if let Component::Plant(i) = c {
-                    let spec = &self.plant_effects[*i];
-                    active.push(spec.name);
-                    for (r, v) in spec.fit.iter().zip(values) {
-                        params.insert(r.name.to_string(), *v);
-                    }
-                }
-            }
+            let (params, active) = self.model_with(fitted);
             self.plant.simulate(&params, &active, self.data)?
         };
         Ok(self.with_refitted_start(raw, fitted))
+    }
+
+    /// The user's model with the plant components of `fitted` added: its parameters and
+    /// active effects.
+    fn model_with(&self, fitted: &[(Component, Vec<f64>)]) -> (Params, Vec<&str>) {
+        let mut params = self.base.clone();
+        let mut active: Vec<&str> = self.sim_effects.iter().map(String::as_str).collect();
+        for (c, values) in fitted {
+            if let Component::Plant(i) = c {
+                let spec = &self.plant_effects[*i];
+                active.push(spec.name);
+                for (r, v) in spec.fit.iter().zip(values) {
+                    params.insert(r.name.to_string(), *v);
+                }
+            }
+        }
+        (params, active)
+    }
+
+    /// The plant's estimator ([`GapPlant::estimate`]) run over the record with the model and
+    /// sensors of `fitted` (empty: the user's model), scored against the truth columns as
+    /// [`Problem::truth_error`] scores a replay. `None` without truth columns or without an
+    /// estimator for the plant; `Err` when the estimator fails on this model.
+    pub fn estimation_error(
+        &self,
+        fitted: &[(Component, Vec<f64>)],
+    ) -> Option<Result<f64, String>> {
+        if self.data.truth.is_empty() {
+            return None;
+        }
+        let (params, active) = self.model_with(fitted);
+        let channels = (0..self.outputs.len())
+            .map(|ch| {
+                let effects: Vec<(GenericKind, Vec<f64>)> = fitted
+                    .iter()
+                    .filter_map(|(c, v)| match c {
+                        Component::Generic(kind, c) if *c == ch => Some((*kind, v.clone())),
+                        _ => None,
+                    })
+                    .collect();
+                ChannelSensor::new(&self.measured[ch], self.sigma[ch], self.data.dt, &effects)
+            })
+            .collect();
+        let estimates = self
+            .plant
+            .estimate(&params, &active, self.data, &Sensors { channels })?;
+        Some(estimates.and_then(|states| {
+            self.states_error(&states)
+                .ok_or_else(|| "no truth column is an estimated state".to_string())
+        }))
+    }
+
+    /// Fills [`Evaluation::estimation_error_before`] and `_after` of `evaluations` (the
+    /// estimator runs once per candidate, so only for the ranking that is reported).
+    pub fn add_estimation_errors(&self, evaluations: &mut [Evaluation]) {
+        let Some(before) = self.estimation_error(&[]) else {
+            return;
+        };
+        let before = before.ok();
+        for e in evaluations {
+            e.estimation_error_before = before;
+            e.estimation_error_after = self.estimation_error(&e.fitted).and_then(Result::ok);
+        }
     }
 
     /// The same problem on `data` (the record read under another
@@ -895,20 +956,33 @@ impl<'a> Problem<'a> {
             .collect()
     }
 
-    /// RMS over truth columns (each scaled by its own std over the data) of the replayed
-    /// states' error on the held-out samples; `None` without truth columns in common.
+    /// RMS over truth columns (each scaled by its own std over the data, a constant one by
+    /// its value) of the replayed states' error on the held-out samples; `None` without
+    /// truth columns in common.
     pub fn truth_error(&self, sim: &Simulation) -> Option<f64> {
+        self.states_error(&sim.states)
+    }
+
+    /// [`Problem::truth_error`] of states by name.
+    fn states_error(&self, states: &BTreeMap<String, Vec<f64>>) -> Option<f64> {
         let mut acc = 0.0;
         let mut count = 0usize;
         for (name, x) in &self.data.truth {
-            let Some(est) = sim.states.get(name) else {
+            let Some(est) = states.get(name) else {
                 continue;
             };
             let finite: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
             let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
             let var =
                 finite.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / finite.len().max(1) as f64;
-            let scale = if var > 0.0 { var.sqrt() } else { 1.0 };
+            // A constant column (a parameter) is scored by its relative error.
+            let scale = if var > (1e-9 * mean).powi(2) {
+                var.sqrt()
+            } else if mean != 0.0 {
+                mean.abs()
+            } else {
+                1.0
+            };
             for k in 0..x.len() {
                 if self.test[k] && x[k].is_finite() && est[k].is_finite() {
                     acc += ((x[k] - est[k]) / scale).powi(2);
@@ -1046,8 +1120,10 @@ impl<'a> Problem<'a> {
             } else {
                 0.0
             },
-            truth_error_before: self.truth_error(&self.nominal),
-            truth_error_after: self.truth_error(&sim),
+            replay_error_before: self.truth_error(&self.nominal),
+            replay_error_after: self.truth_error(&sim),
+            estimation_error_before: None,
+            estimation_error_after: None,
             worst_block_p: self.worst_block_p(&sim, &quantisers),
             train_cost: best,
             absolute_score: absolute,
@@ -1501,8 +1577,10 @@ mod tests {
             gap_before: 0.0,
             gap_after: 0.0,
             shrink: 0.0,
-            truth_error_before: None,
-            truth_error_after: None,
+            replay_error_before: None,
+            replay_error_after: None,
+            estimation_error_before: None,
+            estimation_error_after: None,
             worst_block_p: 1.0,
             train_cost: 0.0,
             absolute_score: score,

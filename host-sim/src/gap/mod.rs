@@ -21,6 +21,7 @@ pub mod bench;
 pub mod dc_motor;
 pub mod diagnose;
 pub mod effects;
+pub mod estimate;
 pub mod meta;
 pub mod plant;
 pub mod report;

@@ -11,6 +11,7 @@
 //! To add a plant: implement the trait (see [`crate::gap::dc_motor`] for a complete worked
 //! example) and add it to [`builtin_plant`].
 
+use crate::gap::estimate::Sensors;
 use std::collections::BTreeMap;
 
 /// How a parameter is searched between its bounds.
@@ -418,6 +419,22 @@ pub trait GapPlant: Sync {
     ) -> Result<Simulation, String>;
     /// Plant-specific operating regimes (the diagnoser adds generic quantile bins).
     fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime>;
+
+    /// The project's estimator for the plant run over the record (closed loop on the
+    /// readings) with the model at `params` and `active` effects, reading the outputs
+    /// through `sensors` (one per [`GapPlant::outputs`]; see [`crate::gap::estimate`]): its
+    /// state estimates by name, compared with the record's `x:<name>` truth columns.
+    /// `None` (the default): the plant has no estimator, and only the replay's error is
+    /// reported.
+    fn estimate(
+        &self,
+        _params: &Params,
+        _active: &[&str],
+        _data: &PlantData,
+        _sensors: &Sensors,
+    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+        None
+    }
 
     /// Catalogue effects that a model with these parameters already has beside
     /// `sim_effects` (the valve's orifices choke unless `[model]` says they never do);

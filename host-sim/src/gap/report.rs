@@ -85,7 +85,7 @@ pub fn markdown(d: &Diagnosis) -> String {
     for line in summary_lines(d) {
         let _ = writeln!(s, "- {line}");
     }
-    s.push_str("\n## Ranking (held-out)\n\n| # | effect | score (nats) | gap before | gap after | shrink | truth error before / after | parameters |\n|---|---|---|---|---|---|---|---|\n");
+    s.push_str("\n## Ranking (held-out)\n\n| # | effect | score (nats) | gap before | gap after | shrink | replay error before / after | estimation error before / after | parameters |\n|---|---|---|---|---|---|---|---|---|\n");
     for (i, e) in d.ranking.iter().take(SHOWN).enumerate() {
         let params: Vec<String> = e
             .params
@@ -94,15 +94,17 @@ pub fn markdown(d: &Diagnosis) -> String {
             .collect();
         let _ = writeln!(
             s,
-            "| {} | {} | {:.1} | {:.3} | {:.3} | {:.3} | {} / {} | {} |",
+            "| {} | {} | {:.1} | {:.3} | {:.3} | {:.3} | {} / {} | {} / {} | {} |",
             i + 1,
             e.effect,
             e.score,
             e.gap_before,
             e.gap_after,
             e.shrink,
-            fmt_opt(e.truth_error_before),
-            fmt_opt(e.truth_error_after),
+            fmt_opt(e.replay_error_before),
+            fmt_opt(e.replay_error_after),
+            fmt_opt(e.estimation_error_before),
+            fmt_opt(e.estimation_error_after),
             params.join(", ")
         );
     }
@@ -425,7 +427,7 @@ pub fn html_page(d: &Diagnosis) -> String {
     }
     s.push_str("</ul><h2>Ranking (held-out shrink; verdict in red)</h2>");
     s.push_str(&ranking_svg(d));
-    s.push_str("<table><tr><th>#</th><th>effect</th><th>score</th><th>gap before</th><th>gap after</th><th>shrink</th><th>parameters</th></tr>");
+    s.push_str("<table><tr><th>#</th><th>effect</th><th>score</th><th>gap before</th><th>gap after</th><th>shrink</th><th>estimation error before / after</th><th>parameters</th></tr>");
     for (i, e) in d.ranking.iter().take(SHOWN).enumerate() {
         let params: Vec<String> = e
             .params
@@ -434,13 +436,15 @@ pub fn html_page(d: &Diagnosis) -> String {
             .collect();
         let _ = write!(
             s,
-            "<tr><td>{}</td><td>{}</td><td>{:.1}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{:.1}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{} / {}</td><td>{}</td></tr>",
             i + 1,
             esc(&e.effect),
             e.score,
             e.gap_before,
             e.gap_after,
             e.shrink,
+            fmt_opt(e.estimation_error_before),
+            fmt_opt(e.estimation_error_after),
             esc(&params.join(", "))
         );
     }

@@ -21,9 +21,17 @@ use crate::gap::plant::{
     EffectSpec, GapPlant, MotionThresholds, ParamSpec, Params, PlantData, Regime, Scale,
     Simulation, motion_regimes, param, substeps_for,
 };
-use nalgebra::Vector6;
+use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
+use nalgebra::{Vector1, Vector3, Vector6};
 use prognos_core::model::rk4;
-use prognos_core::plants::scooter::{OMEGA_F, OMEGA_R, S_M, ScooterParams, THETA_F, THETA_R, V_M};
+use nalgebra::SVector;
+use prognos_core::filter::adaptive_ukf::Adaptation;
+use prognos_core::model::Model;
+use prognos_core::pipeline::scooter::ScooterConfig;
+use prognos_core::plants::scooter::{
+    BETA_THETA_R, K1, NS as ESTIMATOR_NS, NX as ESTIMATOR_NX, OMEGA_F, OMEGA_R, R_RV, S_M,
+    ScooterModel, ScooterParams, THETA_F, THETA_R, V_M,
+};
 use std::collections::BTreeMap;
 
 /// The scooter gap plant.
@@ -222,15 +230,8 @@ pub fn scooter_params(params: &Params) -> ScooterParams<f64> {
     }
 }
 
-/// One replay. `substep_factor` multiplies the model's sub-steps (the bench's truth runs
-/// finer); `body_force(t)` is a force (N) on the body the caller adds (the bench's
-/// out-of-catalogue effects; zero for the diagnosis).
-pub fn simulate_scooter(
-    params: &Params,
-    data: &PlantData,
-    substep_factor: u32,
-    body_force: &dyn Fn(f64) -> f64,
-) -> Result<Simulation, String> {
+/// The core's parameters and the two sensor efficiencies, checked.
+fn checked_params(params: &Params) -> Result<(ScooterParams<f64>, f64, f64), String> {
     let p = scooter_params(params);
     let positive = [p.n3, p.n4, p.m, p.j_f, p.k1, p.k2, p.rear_inertia()];
     if !positive.iter().all(|v| *v > 0.0) {
@@ -242,18 +243,37 @@ pub fn simulate_scooter(
     if beta_r.abs() < 1e-9 || beta_v.abs() < 1e-9 {
         return Err("sensor efficiencies must be nonzero".into());
     }
-    let max_step = param(params, "max_step");
-    let voltage = data.input("voltage").ok_or("missing u:voltage")?;
-    let n = data.len();
+    Ok((p, beta_r, beta_v))
+}
+
+/// The state the replay (and the estimator) start from: the speeds from the first
+/// readings, the shafts twisted by the torques that carry the front wheel's steady friction.
+fn initial_state(p: &ScooterParams<f64>, beta_r: f64, beta_v: f64, data: &PlantData) -> Vector6<f64> {
     let mut x = Vector6::<f64>::zeros();
     x[OMEGA_R] = data.first_output("rear_speed").map_or(0.0, |v| v / beta_r);
     x[V_M] = data.first_output("body_speed").map_or(0.0, |v| v / beta_v);
     x[OMEGA_F] = data.first_output("front_speed").unwrap_or(x[V_M] / p.n4);
-    // Shafts start twisted by the torques that carry the front wheel's steady friction.
     let front_torque = p.r_fc * p.sign(x[OMEGA_F]) + p.r_fv * x[OMEGA_F];
     x[THETA_F] = -front_torque / p.k2;
     x[S_M] = 0.0;
     x[THETA_R] = front_torque / p.k1;
+    x
+}
+
+/// One replay. `substep_factor` multiplies the model's sub-steps (the bench's truth runs
+/// finer); `body_force(t)` is a force (N) on the body the caller adds (the bench's
+/// out-of-catalogue effects; zero for the diagnosis).
+pub fn simulate_scooter(
+    params: &Params,
+    data: &PlantData,
+    substep_factor: u32,
+    body_force: &dyn Fn(f64) -> f64,
+) -> Result<Simulation, String> {
+    let (p, beta_r, beta_v) = checked_params(params)?;
+    let max_step = param(params, "max_step");
+    let voltage = data.input("voltage").ok_or("missing u:voltage")?;
+    let n = data.len();
+    let mut x = initial_state(&p, beta_r, beta_v, data);
     let mut out: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(n)).collect();
     let mut states: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(n)).collect();
     for k in 0..n {
@@ -295,6 +315,83 @@ pub fn simulate_scooter(
     })
 }
 
+/// Fault parameters the scooter's estimator tracks (augmented states of the core's
+/// [`ScooterModel`]), by the `[model]` name a truth column `x:<name>` gives them.
+pub const ESTIMATED_PARAMETERS: [(&str, usize); 3] = [
+    ("beta_theta_r", BETA_THETA_R),
+    ("rear_viscous", R_RV),
+    ("rear_shaft_stiffness", K1),
+];
+
+/// The pipeline's bounds on the fault parameters, widened to hold the model's own values
+/// with room on either side (a fitted shaft stiffness may lie below the pipeline's floor).
+fn parameter_bounds(
+    config: &ScooterConfig<f64>,
+    x0: &SVector<f64, ESTIMATOR_NX>,
+) -> (SVector<f64, ESTIMATOR_NX>, SVector<f64, ESTIMATOR_NX>) {
+    let (mut lo, mut hi) = (config.adaptive.lower, config.adaptive.upper);
+    for (_, i) in ESTIMATED_PARAMETERS {
+        lo[i] = lo[i].min(0.5 * x0[i]);
+        hi[i] = hi[i].max(2.0 * x0[i]);
+    }
+    (lo, hi)
+}
+
+/// The project's scooter estimator over the record: the core's [`ScooterModel`] (six
+/// dynamic states and the fault parameters `beta_theta_r`, `R_rv`, `K1` of the paper's
+/// AEUKF) in the core's UKF with the on-board pipeline's initial covariance and process
+/// noise (its adaptation off), the model's other parameters at `params`. Estimates of
+/// `omega_r`, `v_m`, `omega_f` and the three fault parameters: an unmodelled effect shows
+/// as a fault parameter drifting to absorb it.
+pub fn estimate_scooter(
+    params: &Params,
+    data: &PlantData,
+    sensors: &Sensors,
+) -> Result<BTreeMap<String, Vec<f64>>, String> {
+    let (p, beta_r, beta_v) = checked_params(params)?;
+    let max_step = param(params, "max_step");
+    let voltage = data.input("voltage").ok_or("missing u:voltage")?;
+    let config = ScooterConfig::<f64>::new(Adaptation::Enhanced);
+    let mut x0 = SVector::<f64, ESTIMATOR_NX>::zeros();
+    x0.fixed_rows_mut::<6>(0)
+        .copy_from(&initial_state(&p, beta_r, beta_v, data));
+    x0[BETA_THETA_R] = beta_r;
+    x0[R_RV] = p.r_rv;
+    x0[K1] = p.k1;
+    let mut p0 = config.p0;
+    // The measured speeds start within their readings' noise.
+    for (state, channel, scale) in [(OMEGA_R, 0, beta_r), (V_M, 1, beta_v), (OMEGA_F, 2, 1.0)] {
+        if let Some(c) = sensors.channels.get(channel).filter(|c| c.sigma.is_finite()) {
+            p0[state] = (c.sigma / scale.abs().max(1e-9)).powi(2).max(1e-12);
+        }
+    }
+    let model = StepModel {
+        step: |x: &SVector<f64, ESTIMATOR_NX>, u: &Vector1<f64>, dt: f64| {
+            let core = ScooterModel {
+                params: p,
+                substeps: substeps_for(dt, max_step),
+                parameter_floor: 1e-3,
+            };
+            Model::step(&core, x, u, dt)
+        },
+        outputs: |x: &SVector<f64, ESTIMATOR_NX>| {
+            Vector3::new(x[BETA_THETA_R] * x[OMEGA_R], beta_v * x[V_M], x[OMEGA_F])
+        },
+    };
+    let setup = FilterSetup {
+        x0,
+        p0,
+        // The pipeline's per-step variances are for its 0.02 s steps.
+        q_rate: config.q0 / 0.02,
+        bounds: Some(parameter_bounds(&config, &x0)),
+    };
+    // The replay's row convention: the step ending at row k + 1 holds row k + 1's voltage.
+    let input = |k: usize| Vector1::new(voltage.get(k + 1).copied().unwrap_or(0.0));
+    let mut names = vec![("omega_r", OMEGA_R), ("v_m", V_M), ("omega_f", OMEGA_F)];
+    names.extend(ESTIMATED_PARAMETERS);
+    run_ukf::<_, _, ESTIMATOR_NX, ESTIMATOR_NS, 1, 3>(&model, &setup, &data.t, input, sensors, &names)
+}
+
 impl GapPlant for ScooterGapPlant {
     fn name(&self) -> &'static str {
         "scooter"
@@ -332,6 +429,16 @@ impl GapPlant for ScooterGapPlant {
         data: &PlantData,
     ) -> Result<Simulation, String> {
         simulate_scooter(params, data, 1, &|_| 0.0)
+    }
+
+    fn estimate(
+        &self,
+        params: &Params,
+        _active: &[&str],
+        data: &PlantData,
+        sensors: &Sensors,
+    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+        Some(estimate_scooter(params, data, sensors))
     }
 
     fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {
