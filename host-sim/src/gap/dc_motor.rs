@@ -8,11 +8,16 @@
 //! tau_load`. Inputs `u:voltage` (V) and optional `u:load_torque` (N m); outputs
 //! `y:current` (A), `y:speed` (rad/s). Own catalogue: `coulomb_friction` (`tau_c`) and
 //! `brush_drop` (`V_b`, the brush contact voltage drop); both are off in the nominal model.
+//! Its estimator ([`estimate_motor`], the core's UKF on the same equations) shows how a
+//! plant reports the downstream estimation error of its truth columns.
 
 use crate::gap::plant::{
     EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, motion_regimes,
     param, substeps_for,
 };
+use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
+use nalgebra::Vector2;
+use prognos_core::model::rk4;
 use std::collections::BTreeMap;
 
 /// The DC motor example plant.
@@ -90,6 +95,55 @@ pub fn dc_motor_effects() -> Vec<EffectSpec> {
     ]
 }
 
+/// The motor's equations at one parameter set.
+#[derive(Clone, Copy, Debug)]
+struct MotorDynamics {
+    r: f64,
+    l: f64,
+    k: f64,
+    j: f64,
+    b: f64,
+    tau_c: f64,
+    v_b: f64,
+    smooth: f64,
+}
+
+impl MotorDynamics {
+    /// The parameters with `active` effects on; positive `R`, `L` and `J` required.
+    fn new(params: &Params, active: &[&str]) -> Result<Self, String> {
+        let g = |n: &str| param(params, n);
+        let on = |effect: &str| {
+            if active.contains(&effect) {
+                g(effect)
+            } else {
+                0.0
+            }
+        };
+        let m = Self {
+            r: g("resistance"),
+            l: g("inductance"),
+            k: g("motor_constant"),
+            j: g("inertia"),
+            b: g("viscous_friction"),
+            tau_c: on("coulomb_friction"),
+            v_b: on("brush_drop"),
+            smooth: g("sign_smoothing").max(1e-9),
+        };
+        if !(m.r > 0.0 && m.l > 0.0 && m.j > 0.0) {
+            return Err("resistance, inductance and inertia must be positive".into());
+        }
+        Ok(m)
+    }
+
+    /// `(di/dt, dw/dt)` at current `i`, speed `w`, voltage `v` and load torque `tl`.
+    fn derivative(&self, i: f64, w: f64, v: f64, tl: f64) -> (f64, f64) {
+        let di = (v - self.r * i - self.k * w - self.v_b * (i / self.smooth).tanh()) / self.l;
+        let dw =
+            (self.k * i - self.b * w - self.tau_c * (w / self.smooth).tanh() - tl) / self.j;
+        (di, dw)
+    }
+}
+
 /// One replay of the motor. `extra_torque(t)` is a disturbance torque the caller adds (the
 /// bench's out-of-catalogue effect; zero for the diagnosis).
 pub fn simulate_motor(
@@ -99,40 +153,15 @@ pub fn simulate_motor(
     substep_factor: u32,
     extra_torque: &dyn Fn(f64) -> f64,
 ) -> Result<Simulation, String> {
-    let g = |n: &str| param(params, n);
-    let (r, l, k, j, b) = (
-        g("resistance"),
-        g("inductance"),
-        g("motor_constant"),
-        g("inertia"),
-        g("viscous_friction"),
-    );
-    if !(r > 0.0 && l > 0.0 && j > 0.0) {
-        return Err("resistance, inductance and inertia must be positive".into());
-    }
-    let tau_c = if active.contains(&"coulomb_friction") {
-        g("coulomb_friction")
-    } else {
-        0.0
-    };
-    let v_b = if active.contains(&"brush_drop") {
-        g("brush_drop")
-    } else {
-        0.0
-    };
-    let smooth = g("sign_smoothing").max(1e-9);
-    let max_step = g("max_step");
+    let motor = MotorDynamics::new(params, active)?;
+    let max_step = param(params, "max_step");
     let voltage = data.input("voltage").ok_or("missing u:voltage")?;
     let load = data.input("load_torque");
     let n = data.len();
     let mut w = data.first_output("speed").unwrap_or(0.0);
     let mut i = data.first_output("current").unwrap_or(0.0);
     let (mut out_i, mut out_w) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    let rhs = |i: f64, w: f64, v: f64, tl: f64| {
-        let di = (v - r * i - k * w - v_b * (i / smooth).tanh()) / l;
-        let dw = (k * i - b * w - tau_c * (w / smooth).tanh() - tl) / j;
-        (di, dw)
-    };
+    let rhs = |i: f64, w: f64, v: f64, tl: f64| motor.derivative(i, w, v, tl);
     for s in 0..n {
         out_i.push(i);
         out_w.push(w);
@@ -165,6 +194,54 @@ pub fn simulate_motor(
         states,
         variances: Vec::new(),
     })
+}
+
+/// The motor's estimator: the core's UKF on `[current, speed]` with the same equations,
+/// trusting the model to a tenth of each sensor's noise per sample (a user plant states
+/// its own estimator here; this one is the simplest that closes the loop on the readings).
+pub fn estimate_motor(
+    params: &Params,
+    active: &[&str],
+    data: &PlantData,
+    sensors: &Sensors,
+) -> Result<BTreeMap<String, Vec<f64>>, String> {
+    let motor = MotorDynamics::new(params, active)?;
+    let max_step = param(params, "max_step");
+    let voltage = data.input("voltage").ok_or("missing u:voltage")?;
+    let load = data.input("load_torque");
+    let model = StepModel {
+        step: |x: &Vector2<f64>, u: &Vector2<f64>, dt: f64| {
+            let rhs = |s: &Vector2<f64>| {
+                let (di, dw) = motor.derivative(s[0], s[1], u[0], u[1]);
+                Vector2::new(di, dw)
+            };
+            rk4(rhs, x, dt, substeps_for(dt, max_step))
+        },
+        outputs: |x: &Vector2<f64>| *x,
+    };
+    let variance = |c: usize| sensors.channels.get(c).map_or(1.0, |s| s.sigma * s.sigma);
+    let dt = data.dt.max(1e-12);
+    let setup = FilterSetup {
+        x0: Vector2::new(
+            data.first_output("current").unwrap_or(0.0),
+            data.first_output("speed").unwrap_or(0.0),
+        ),
+        p0: Vector2::new(variance(0), variance(1)),
+        q_rate: Vector2::new(0.01 * variance(0) / dt, 0.01 * variance(1) / dt),
+        bounds: None,
+    };
+    let input = |k: usize| {
+        let at = |u: Option<&[f64]>| u.and_then(|u| u.get(k)).copied().unwrap_or(0.0);
+        Vector2::new(at(Some(voltage)), at(load))
+    };
+    run_ukf::<_, _, 2, 5, 2, 2>(
+        &model,
+        &setup,
+        &data.t,
+        input,
+        sensors,
+        &[("current", 0), ("speed", 1)],
+    )
 }
 
 impl GapPlant for DcMotorPlant {
@@ -208,6 +285,16 @@ impl GapPlant for DcMotorPlant {
         data: &PlantData,
     ) -> Result<Simulation, String> {
         simulate_motor(params, active, data, 1, &|_| 0.0)
+    }
+
+    fn estimate(
+        &self,
+        params: &Params,
+        active: &[&str],
+        data: &PlantData,
+        sensors: &Sensors,
+    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+        Some(estimate_motor(params, active, data, sensors))
     }
 
     fn regimes(&self, data: &PlantData, nominal: &Simulation) -> Vec<Regime> {

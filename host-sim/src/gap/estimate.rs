@@ -5,11 +5,12 @@
 //! A plant opts in through [`crate::gap::plant::GapPlant::estimate`], usually by handing
 //! its one-step model to [`run_ukf`]. The sensors the filter sees are those of the
 //! candidate: its generic sensor effects enter the measurement function when they are a
-//! static map of the model's output (bias, scale, clipping, dead zone, a quantiser's mean),
-//! and are undone on the readings when they act over time (a delay is shifted back, a
-//! first-order lag inverted, its noise amplified by the inversion and declared so).
+//! static map of the model's output (bias, scale, clipping, dead zone), a quantiser as the
+//! rounding noise it adds, and effects that act over time are undone on the readings (a
+//! delay is shifted back, a first-order lag inverted, its noise amplified by the inversion
+//! and declared so).
 
-use crate::gap::effects::{GenericKind, quantised_mean};
+use crate::gap::effects::GenericKind;
 use nalgebra::{SMatrix, SVector};
 use prognos_core::filter::ukf::{SigmaParams, Ukf};
 use prognos_core::model::{Model, Observe};
@@ -53,9 +54,11 @@ impl ChannelSensor {
                     sigma *= (1.0 + (1.0 - alpha).powi(2)).sqrt() / alpha.max(1e-12);
                 }
                 GenericKind::Quantisation => {
-                    // Rounding adds step^2 / 12 to the readings' variance.
-                    sigma = (sigma * sigma + p * p / 12.0).sqrt();
-                    maps.push((*kind, values.clone()));
+                    // Read as the model's output plus rounding noise of variance
+                    // step^2 / 12 on the noise fitted before the quantiser: through the
+                    // staircase of its mean the sigma points would see steps, not a slope.
+                    let before = values.get(1).copied().unwrap_or(sigma);
+                    sigma = (before * before + p * p / 12.0).sqrt();
                 }
                 _ => maps.push((*kind, values.clone())),
             }
@@ -74,12 +77,11 @@ impl ChannelSensor {
             match kind {
                 GenericKind::SensorBias => y + p,
                 GenericKind::SensorScale => y * (1.0 + p),
-                GenericKind::Quantisation => {
-                    quantised_mean(y, p, values.get(1).copied().unwrap_or(0.0))
-                }
                 GenericKind::OutputSaturation => y.clamp(-p, p),
                 GenericKind::DeadZone => y.signum() * (y.abs() - p).max(0.0),
-                GenericKind::MeasurementDelay | GenericKind::FirstOrderLag => y,
+                GenericKind::Quantisation
+                | GenericKind::MeasurementDelay
+                | GenericKind::FirstOrderLag => y,
             }
         })
     }
