@@ -618,7 +618,10 @@ impl BenchPlant for WheelBench {
                 ("temperature".into(), temperature),
                 ("angle".into(), angle),
             ],
-            states: vec![("current".into(), current.clone()), ("speed".into(), speed.clone())],
+            states: vec![
+                ("current".into(), current.clone()),
+                ("speed".into(), speed.clone()),
+            ],
             outputs: vec![current, speed],
         }
     }
@@ -1094,7 +1097,11 @@ fn to_csv(bp: &dyn BenchPlant, clean: &Clean, measured: &[Vec<f64>]) -> String {
         let mut row = vec![clean.t[k]];
         row.extend(clean.inputs.iter().map(|(_, v)| v[k]));
         row.extend(measured.iter().map(|v| v[k]));
-        row.extend(truth.iter().map(|(_, v)| v.get(k).copied().unwrap_or(f64::NAN)));
+        row.extend(
+            truth
+                .iter()
+                .map(|(_, v)| v.get(k).copied().unwrap_or(f64::NAN)),
+        );
         ts.rows.push(row);
     }
     let mut buf = Vec::new();
@@ -1533,9 +1540,8 @@ pub fn run_one(d: &Dataset) -> Result<Outcome, SimError> {
         .chain(&diag.pairs)
         .find(|e| e.effect == diag.verdict);
     let shrink = chosen.map_or(0.0, |e| e.shrink);
-    let estimation_error = chosen.and_then(|e| {
-        Some([e.estimation_error_before?, e.estimation_error_after?])
-    });
+    let estimation_error =
+        chosen.and_then(|e| Some([e.estimation_error_before?, e.estimation_error_after?]));
     Ok(Outcome {
         name: d.name.clone(),
         label: d.label.clone(),
@@ -1797,8 +1803,7 @@ pub fn score(outcomes: &[Outcome], keep: impl Fn(f64) -> bool) -> Scores {
         ),
         median_shrink: crate::gap::stats::median(&shrinks).unwrap_or(f64::NAN),
         estimated: estimation_ratios.len(),
-        median_estimation_ratio: crate::gap::stats::median(&estimation_ratios)
-            .unwrap_or(f64::NAN),
+        median_estimation_ratio: crate::gap::stats::median(&estimation_ratios).unwrap_or(f64::NAN),
         nones: nones.len(),
         false_attribution: frac(&nones, |o| o.verdict != "none"),
         unknowns: unknowns.len(),

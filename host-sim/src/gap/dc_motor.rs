@@ -11,11 +11,11 @@
 //! Its estimator ([`estimate_motor`], the core's UKF on the same equations) shows how a
 //! plant reports the downstream estimation error of its truth columns.
 
+use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
 use crate::gap::plant::{
     EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, motion_regimes,
     param, substeps_for,
 };
-use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
 use nalgebra::Vector2;
 use prognos_core::model::rk4;
 use std::collections::BTreeMap;
@@ -138,8 +138,7 @@ impl MotorDynamics {
     /// `(di/dt, dw/dt)` at current `i`, speed `w`, voltage `v` and load torque `tl`.
     fn derivative(&self, i: f64, w: f64, v: f64, tl: f64) -> (f64, f64) {
         let di = (v - self.r * i - self.k * w - self.v_b * (i / self.smooth).tanh()) / self.l;
-        let dw =
-            (self.k * i - self.b * w - self.tau_c * (w / self.smooth).tanh() - tl) / self.j;
+        let dw = (self.k * i - self.b * w - self.tau_c * (w / self.smooth).tanh() - tl) / self.j;
         (di, dw)
     }
 }

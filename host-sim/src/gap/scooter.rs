@@ -17,16 +17,16 @@
 //! efficiencies *are* sensor scales of their channels, so they replace the generic
 //! `sensor_scale` there.
 
+use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
 use crate::gap::plant::{
     EffectSpec, GapPlant, MotionThresholds, ParamSpec, Params, PlantData, Regime, Scale,
     Simulation, motion_regimes, param, substeps_for,
 };
-use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
-use nalgebra::{Vector1, Vector3, Vector6};
-use prognos_core::model::rk4;
 use nalgebra::SVector;
+use nalgebra::{Vector1, Vector3, Vector6};
 use prognos_core::filter::adaptive_ukf::Adaptation;
 use prognos_core::model::Model;
+use prognos_core::model::rk4;
 use prognos_core::pipeline::scooter::ScooterConfig;
 use prognos_core::plants::scooter::{
     BETA_THETA_R, K1, NS as ESTIMATOR_NS, NX as ESTIMATOR_NX, OMEGA_F, OMEGA_R, R_RV, S_M,
@@ -248,7 +248,12 @@ fn checked_params(params: &Params) -> Result<(ScooterParams<f64>, f64, f64), Str
 
 /// The state the replay (and the estimator) start from: the speeds from the first
 /// readings, the shafts twisted by the torques that carry the front wheel's steady friction.
-fn initial_state(p: &ScooterParams<f64>, beta_r: f64, beta_v: f64, data: &PlantData) -> Vector6<f64> {
+fn initial_state(
+    p: &ScooterParams<f64>,
+    beta_r: f64,
+    beta_v: f64,
+    data: &PlantData,
+) -> Vector6<f64> {
     let mut x = Vector6::<f64>::zeros();
     x[OMEGA_R] = data.first_output("rear_speed").map_or(0.0, |v| v / beta_r);
     x[V_M] = data.first_output("body_speed").map_or(0.0, |v| v / beta_v);
@@ -361,7 +366,11 @@ pub fn estimate_scooter(
     let mut p0 = config.p0;
     // The measured speeds start within their readings' noise.
     for (state, channel, scale) in [(OMEGA_R, 0, beta_r), (V_M, 1, beta_v), (OMEGA_F, 2, 1.0)] {
-        if let Some(c) = sensors.channels.get(channel).filter(|c| c.sigma.is_finite()) {
+        if let Some(c) = sensors
+            .channels
+            .get(channel)
+            .filter(|c| c.sigma.is_finite())
+        {
             p0[state] = (c.sigma / scale.abs().max(1e-9)).powi(2).max(1e-12);
         }
     }
@@ -389,7 +398,9 @@ pub fn estimate_scooter(
     let input = |k: usize| Vector1::new(voltage.get(k + 1).copied().unwrap_or(0.0));
     let mut names = vec![("omega_r", OMEGA_R), ("v_m", V_M), ("omega_f", OMEGA_F)];
     names.extend(ESTIMATED_PARAMETERS);
-    run_ukf::<_, _, ESTIMATOR_NX, ESTIMATOR_NS, 1, 3>(&model, &setup, &data.t, input, sensors, &names)
+    run_ukf::<_, _, ESTIMATOR_NX, ESTIMATOR_NS, 1, 3>(
+        &model, &setup, &data.t, input, sensors, &names,
+    )
 }
 
 impl GapPlant for ScooterGapPlant {
