@@ -521,8 +521,7 @@ fn diagnose_timed(
             held_out_blocks = "even (from 2)";
         }
     }
-    problem.add_estimation_errors(&mut ranking);
-    problem.add_estimation_errors(&mut pairs);
+    problem.add_estimation_errors(&mut ranking, &mut pairs);
     let chosen = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
     if let Some(channel) = chosen.and_then(|e| signature_channel(&problem, e)) {
         // The gap lies where the explaining effect changes the model most, in noise units

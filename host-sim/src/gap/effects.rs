@@ -574,14 +574,14 @@ impl<'a> Problem<'a> {
         }))
     }
 
-    /// Fills [`Evaluation::estimation_error_before`] and `_after` of `evaluations` (the
-    /// estimator runs once per candidate, so only for the ranking that is reported).
-    pub fn add_estimation_errors(&self, evaluations: &mut [Evaluation]) {
+    /// Fills [`Evaluation::estimation_error_before`] and `_after` of the reported ranking
+    /// and pairs (the estimator runs once per candidate, the user's model once).
+    pub fn add_estimation_errors(&self, ranking: &mut [Evaluation], pairs: &mut [Evaluation]) {
         let Some(before) = self.estimation_error(&[]) else {
             return;
         };
         let before = before.ok();
-        for e in evaluations {
+        for e in ranking.iter_mut().chain(pairs.iter_mut()) {
             e.estimation_error_before = before;
             e.estimation_error_after = self.estimation_error(&e.fitted).and_then(Result::ok);
         }
