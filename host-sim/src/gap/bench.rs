@@ -584,11 +584,14 @@ impl BenchPlant for WheelBench {
             wheel.time = 0.0;
         }
         let (mut current, mut speed, mut angle) = (Vec::new(), Vec::new(), Vec::new());
+        // The viscous coefficient acting at each sample: what the wheel's estimator tracks.
+        let mut viscous = Vec::with_capacity(n);
         let inertia = wheel.params.inertia;
         let omega_d = std::f64::consts::TAU * 0.7;
         let current_at_row =
             self.vary.input_timing == Some(InputTiming::At) && !wheel.effects.driver_lowpass;
         for k in 0..n {
+            viscous.push(wheel.viscous(temperature[k]));
             current.push(if current_at_row {
                 wheel.current_following(command[k])
             } else {
@@ -621,6 +624,7 @@ impl BenchPlant for WheelBench {
             states: vec![
                 ("current".into(), current.clone()),
                 ("speed".into(), speed.clone()),
+                ("viscous_coefficient".into(), viscous),
             ],
             outputs: vec![current, speed],
         }

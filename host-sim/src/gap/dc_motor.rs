@@ -216,7 +216,7 @@ pub fn estimate_motor(
             };
             rk4(rhs, x, dt, substeps_for(dt, max_step))
         },
-        outputs: |x: &Vector2<f64>| *x,
+        outputs: |x: &Vector2<f64>, _: usize| *x,
     };
     let variance = |c: usize| sensors.channels.get(c).map_or(1.0, |s| s.sigma * s.sigma);
     let dt = data.dt.max(1e-12);

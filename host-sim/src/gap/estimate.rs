@@ -121,7 +121,8 @@ pub struct Sensors {
 }
 
 /// A plant's one-step model for [`run_ukf`]: `step(x, u, dt)` from one sample to the next,
-/// `outputs(x)` the model's outputs in the plant's order.
+/// `outputs(x, k)` the model's outputs at sample `k` in the plant's order (a plant whose
+/// outputs read an input takes it from the record's row `k`).
 pub struct StepModel<F, H> {
     /// One step of the model.
     pub step: F,
@@ -144,15 +145,17 @@ struct ChannelModel<'a, F, H> {
     model: &'a StepModel<F, H>,
     sensor: &'a ChannelSensor,
     channel: usize,
+    sample: usize,
 }
 
 impl<F, H, const NX: usize, const NU: usize, const NY: usize> Observe<f64, NX, NU, 1>
     for ChannelModel<'_, F, H>
 where
-    H: Fn(&SVector<f64, NX>) -> SVector<f64, NY>,
+    H: Fn(&SVector<f64, NX>, usize) -> SVector<f64, NY>,
 {
     fn observe(&self, x: &SVector<f64, NX>, _u: &SVector<f64, NU>) -> SVector<f64, 1> {
-        SVector::<f64, 1>::new(self.sensor.read((self.model.outputs)(x)[self.channel]))
+        let output = (self.model.outputs)(x, self.sample)[self.channel];
+        SVector::<f64, 1>::new(self.sensor.read(output))
     }
 }
 
@@ -184,7 +187,7 @@ pub fn run_ukf<F, H, const NX: usize, const NS: usize, const NU: usize, const NY
 ) -> Result<BTreeMap<String, Vec<f64>>, String>
 where
     F: Fn(&SVector<f64, NX>, &SVector<f64, NU>, f64) -> SVector<f64, NX>,
-    H: Fn(&SVector<f64, NX>) -> SVector<f64, NY>,
+    H: Fn(&SVector<f64, NX>, usize) -> SVector<f64, NY>,
 {
     if sensors.channels.len() != NY {
         return Err(format!(
@@ -219,6 +222,7 @@ where
                 model,
                 sensor,
                 channel,
+                sample: k,
             };
             // A reading the filter cannot fuse (a covariance that lost definiteness) is
             // skipped; the estimate stays where it was.
@@ -255,7 +259,7 @@ mod tests {
             step: |x: &Vector2<f64>, _u: &Vector1<f64>, dt: f64| {
                 Vector2::new(x[0] + dt * x[1], x[1])
             },
-            outputs: |x: &Vector2<f64>| Vector1::new(x[0]),
+            outputs: |x: &Vector2<f64>, _: usize| Vector1::new(x[0]),
         };
         let n = 400;
         let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.1).collect();

@@ -383,7 +383,7 @@ pub fn estimate_scooter(
             };
             Model::step(&core, x, u, dt)
         },
-        outputs: |x: &SVector<f64, ESTIMATOR_NX>| {
+        outputs: |x: &SVector<f64, ESTIMATOR_NX>, _: usize| {
             Vector3::new(x[BETA_THETA_R] * x[OMEGA_R], beta_v * x[V_M], x[OMEGA_F])
         },
     };

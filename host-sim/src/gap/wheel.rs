@@ -21,7 +21,9 @@ use crate::gap::plant::{
     EffectSpec, FitRange, GapPlant, InputTiming, MotionThresholds, ParamSpec, Params, PlantData,
     Regime, Scale, Side, Simulation, motion_regimes, param,
 };
+use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
 use crate::plants::reaction_wheel::{RippleTorques, ripple_step};
+use nalgebra::{Vector1, Vector2, Vector4};
 use prognos_core::plants::reaction_wheel::WheelParams;
 use std::collections::BTreeMap;
 
@@ -298,6 +300,7 @@ fn unknown_phase_variance(
     variance
 }
 
+#[derive(Clone, Copy)]
 struct Wheel {
     p: WheelParams<f64>,
     on: On,
@@ -308,7 +311,8 @@ struct Wheel {
 }
 
 impl Wheel {
-    fn new(params: &Params, on: On) -> Self {
+    /// The wheel with `params`; positive inertia and viscous coefficient required.
+    fn new(params: &Params, on: On) -> Result<Self, String> {
         let mut p = WheelParams::<f64>::ithaco_type_a();
         let g = |n: &str| param(params, n);
         p.drive_gain = g("drive_gain");
@@ -330,14 +334,18 @@ impl Wheel {
         p.quiescent_power = g("quiescent_power");
         p.noise_angle = g("noise_angle");
         p.noise_frequency = g("noise_frequency");
-        Self {
+        let wheel = Self {
             p,
             on,
             viscous: g("viscous_coefficient"),
             viscous_slope: g("viscous_slope"),
             reference_temperature: g("reference_temperature"),
             noise_phase: g("noise_phase"),
+        };
+        if !(wheel.p.inertia > 0.0 && wheel.viscous > 0.0) {
+            return Err("inertia and viscous_coefficient must be positive".into());
         }
+        Ok(wheel)
     }
 
     fn viscous_at(&self, temperature: f64) -> f64 {
@@ -378,6 +386,275 @@ impl Wheel {
             (p.torque_constant * current - visc * speed - coulomb + extra) / p.inertia,
         )
     }
+}
+
+/// What a replay reads from the record, checked once.
+struct Record<'a> {
+    t: &'a [f64],
+    command: &'a [f64],
+    temperature: Option<&'a [f64]>,
+    angle: Option<&'a [f64]>,
+    /// Without the measured angle the ripple's and cogging's phase is unknown: far above
+    /// the sample rate they are a spread of the sampled speed, not a value to replay.
+    spread: bool,
+    /// Recorded `At` the command, the driver's algebraic current already follows it.
+    current_at_row: bool,
+}
+
+impl<'a> Record<'a> {
+    fn new(w: &Wheel, data: &'a PlantData) -> Result<Self, String> {
+        let angle = data.input("angle");
+        Ok(Self {
+            t: &data.t,
+            command: data.input("command").ok_or("missing u:command")?,
+            temperature: data.input("temperature"),
+            angle,
+            spread: angle.is_none() && (w.on.ripple || w.on.cogging),
+            current_at_row: data.input_timing == InputTiming::At && !w.on.lowpass,
+        })
+    }
+}
+
+/// The wheel between samples: current, speed (with the ripple's swing), rotor angle, and
+/// the swing the ripple adds to the speed around its mean.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct WheelState {
+    current: f64,
+    speed: f64,
+    angle: f64,
+    swing: f64,
+}
+
+impl Wheel {
+    /// The state at the record's first sample: its measured speed (and current, when the
+    /// driver lags), the measured angle.
+    fn initial_state(&self, rec: &Record, data: &PlantData) -> WheelState {
+        let algebraic = self.p.drive_gain * rec.command.first().copied().unwrap_or(0.0);
+        WheelState {
+            current: if self.on.lowpass {
+                data.first_output("current").unwrap_or(algebraic)
+            } else {
+                algebraic
+            },
+            speed: data.first_output("speed").unwrap_or(0.0),
+            angle: rec.angle.and_then(|a| a.first().copied()).unwrap_or(0.0),
+            swing: 0.0,
+        }
+    }
+
+    /// The state as sample `k` shows it: the sample at t_k shows the current of the
+    /// previous step (the command of step k acts from t_k on, zero-order hold), unless the
+    /// record is taken `At` the command and the driver's current follows it at once.
+    fn show(&self, rec: &Record, k: usize, s: &mut WheelState) {
+        if rec.current_at_row {
+            for _ in 0..3 {
+                s.current = self.p.drive_gain * (rec.command[k] + self.feedback(s.current, s.speed));
+            }
+        }
+    }
+
+    /// From sample `k` to `k + 1`; with the ripple's phase unknown, also the variance it
+    /// adds to the speed sampled at `k + 1` (0 otherwise).
+    fn advance(&self, rec: &Record, k: usize, s: WheelState) -> (WheelState, f64) {
+        let p = &self.p;
+        let on = self.on;
+        let v = rec.command[k];
+        let dt = rec.t[k + 1] - rec.t[k];
+        let visc = self.viscous_at(rec.temperature.map_or(self.reference_temperature, |t| t[k]));
+        let extra = if on.noise {
+            p.inertia
+                * p.noise_angle
+                * p.noise_frequency
+                * p.noise_frequency
+                * (p.noise_frequency * (rec.t[k] + 0.5 * dt) + self.noise_phase).sin()
+        } else {
+            0.0
+        };
+        // Sub-steps keep RK4 accurate for a fast driver (w_d h <= 1, inside its stability
+        // limit 2.8) and let the limiter feedback follow the speed.
+        let substeps = if on.lowpass {
+            (p.driver_bandwidth * dt).ceil().max(1.0) as usize
+        } else if on.emf || on.limiter {
+            4
+        } else {
+            1
+        };
+        let h = dt / substeps as f64;
+        let algebraic = |current: &mut f64, speed: f64| {
+            for _ in 0..3 {
+                *current = p.drive_gain * (v + self.feedback(*current, speed));
+            }
+        };
+        let (mut current, mut speed) = (s.current, s.speed);
+        if !on.lowpass {
+            algebraic(&mut current, speed);
+        }
+        let (i0, w0) = (current, speed);
+        for sub in 0..substeps {
+            if !on.lowpass && sub > 0 {
+                algebraic(&mut current, speed);
+            }
+            let (ci, cw) = (current, speed);
+            let (a1, b1) = self.rhs(ci, cw, visc, v, extra);
+            let (a2, b2) = self.rhs(ci + 0.5 * h * a1, cw + 0.5 * h * b1, visc, v, extra);
+            let (a3, b3) = self.rhs(ci + 0.5 * h * a2, cw + 0.5 * h * b2, visc, v, extra);
+            let (a4, b4) = self.rhs(ci + h * a3, cw + h * b3, visc, v, extra);
+            current = ci + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4);
+            speed = cw + h / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4);
+        }
+        let mut angle = rec.angle.map_or(s.angle, |a| a[k]);
+        // The ripple's swing left out, as the truth wheel does (`ripple_step`).
+        let mean_speed = 0.5 * (w0 + speed) - s.swing;
+        if rec.spread {
+            let variance = unknown_phase_variance(
+                *p,
+                on.ripple,
+                on.cogging,
+                0.5 * (i0 + current),
+                mean_speed,
+                dt,
+            );
+            angle += mean_speed * dt;
+            let next = WheelState {
+                current,
+                speed,
+                angle,
+                swing: s.swing,
+            };
+            return (next, variance);
+        }
+        // The measured angle pins the phase at the step's end too: otherwise a replayed
+        // speed error dw puts the ripple 3 N dw dt off (5 rad for 1 rad/s at 20 Hz), and
+        // the fitted ripple itself moves the speed. Taken within half a turn of the
+        // replayed end, so the whole turns between samples follow the replayed speed.
+        let predicted_end = angle + mean_speed * dt;
+        let angle_end = match rec.angle {
+            Some(a) if a[k + 1].is_finite() => {
+                let turn = std::f64::consts::TAU;
+                let off = (a[k + 1] - predicted_end).rem_euclid(turn);
+                predicted_end + if off > 0.5 * turn { off - turn } else { off }
+            }
+            _ => predicted_end,
+        };
+        // Ripple and cogging oscillate far above the sample rate: exact integral of
+        // sin(k theta) over the step at the mean speed.
+        let torques = RippleTorques {
+            ripple: if on.ripple {
+                p.torque_constant * 0.5 * (i0 + current) * p.torque_ripple
+            } else {
+                0.0
+            },
+            cogging: if on.cogging { p.cogging } else { 0.0 },
+            poles: p.poles,
+            inertia: p.inertia,
+        };
+        let (change, swing) = ripple_step(&torques, angle, angle_end, mean_speed, dt);
+        let next = WheelState {
+            current,
+            speed: speed + change,
+            angle: angle_end.rem_euclid(std::f64::consts::TAU),
+            swing,
+        };
+        (next, 0.0)
+    }
+}
+
+/// The wheel's estimator: the core's UKF on `[current, speed, ripple swing, c_v]` with the
+/// replay's equations, the viscous coefficient tracked as a random walk as the wheel
+/// paper's filter tracks the lubricant's friction. Estimates of `current`, `speed` and
+/// the `viscous_coefficient` acting at each sample (at the record's temperature when
+/// `viscous_temperature` is on): an unmodelled friction shows as `c_v` drifting to absorb
+/// it.
+pub fn estimate_wheel(
+    params: &Params,
+    active: &[&str],
+    data: &PlantData,
+    sensors: &Sensors,
+) -> Result<BTreeMap<String, Vec<f64>>, String> {
+    const CURRENT: usize = 0;
+    const SPEED: usize = 1;
+    const SWING: usize = 2;
+    const VISCOUS: usize = 3;
+    let wheel = Wheel::new(params, On::from(active))?;
+    let rec = Record::new(&wheel, data)?;
+    let mut sensors = sensors.clone();
+    if rec.spread {
+        // A ripple of unknown phase is read as the spread it adds to the sampled speed.
+        let replay = WheelGapPlant.simulate(params, active, data)?;
+        let spread = replay.variances.get(1).cloned().flatten().unwrap_or_default();
+        let mean = spread.iter().sum::<f64>() / spread.len().max(1) as f64;
+        if let Some(c) = sensors.channels.get_mut(1) {
+            c.sigma = (c.sigma * c.sigma + mean).sqrt();
+        }
+    }
+    let floor = wheel.p.viscous_floor;
+    let model = StepModel {
+        // The input is the sample index: the step reads command, temperature and angle
+        // from the record.
+        step: |x: &Vector4<f64>, u: &Vector1<f64>, _dt: f64| {
+            let k = u[0] as usize;
+            let mut w = wheel;
+            w.viscous = x[VISCOUS].max(floor);
+            let s = WheelState {
+                current: x[CURRENT],
+                speed: x[SPEED],
+                angle: rec.angle.map_or(0.0, |a| a[k]),
+                swing: x[SWING],
+            };
+            let (mut next, _) = w.advance(&rec, k, s);
+            w.show(&rec, k + 1, &mut next);
+            Vector4::new(next.current, next.speed, next.swing, x[VISCOUS])
+        },
+        outputs: |x: &Vector4<f64>, _: usize| Vector2::new(x[CURRENT], x[SPEED]),
+    };
+    let variance = |c: usize| {
+        sensors
+            .channels
+            .get(c)
+            .map_or(1.0, |s| s.sigma * s.sigma)
+            .max(1e-12)
+    };
+    let dt = data.dt.max(1e-12);
+    let mut start = wheel.initial_state(&rec, data);
+    wheel.show(&rec, 0, &mut start);
+    let c_v = wheel.viscous;
+    let setup = FilterSetup {
+        x0: Vector4::new(start.current, start.speed, 0.0, c_v),
+        p0: Vector4::new(variance(0), variance(1), 1e-6 * variance(1), (0.1 * c_v).powi(2)),
+        // The model is trusted to a tenth of each sensor's noise per sample; c_v may move
+        // by 1 % in 10 s.
+        q_rate: Vector4::new(
+            0.01 * variance(0) / dt,
+            0.01 * variance(1) / dt,
+            1e-6 * variance(1) / dt,
+            (0.01 * c_v).powi(2) / 10.0,
+        ),
+        bounds: Some((
+            Vector4::new(f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY, floor),
+            Vector4::new(f64::INFINITY, f64::INFINITY, f64::INFINITY, 100.0 * c_v),
+        )),
+    };
+    let mut est = run_ukf::<_, _, 4, 9, 1, 2>(
+        &model,
+        &setup,
+        &data.t,
+        |k| Vector1::new(k as f64),
+        &sensors,
+        &[
+            ("current", CURRENT),
+            ("speed", SPEED),
+            ("viscous_coefficient", VISCOUS),
+        ],
+    )?;
+    if let Some(c) = est.get_mut("viscous_coefficient") {
+        for (k, c) in c.iter_mut().enumerate() {
+            let temperature = rec.temperature.map_or(wheel.reference_temperature, |t| t[k]);
+            let mut w = wheel;
+            w.viscous = *c;
+            *c = w.viscous_at(temperature);
+        }
+    }
+    Ok(est)
 }
 
 impl GapPlant for WheelGapPlant {
@@ -436,139 +713,26 @@ impl GapPlant for WheelGapPlant {
         active: &[&str],
         data: &PlantData,
     ) -> Result<Simulation, String> {
-        let on = On::from(active);
-        let w = Wheel::new(params, on);
-        let p = w.p;
-        if !(p.inertia > 0.0 && w.viscous > 0.0) {
-            return Err("inertia and viscous_coefficient must be positive".into());
-        }
+        let w = Wheel::new(params, On::from(active))?;
+        let rec = Record::new(&w, data)?;
         let n = data.len();
-        let command = data.input("command").ok_or("missing u:command")?;
-        let temperature = data.input("temperature");
-        let measured_angle = data.input("angle");
-        let mut speed = data.first_output("speed").unwrap_or(0.0);
-        let mut current = if on.lowpass {
-            data.first_output("current")
-                .unwrap_or(p.drive_gain * command[0])
-        } else {
-            p.drive_gain * command[0]
-        };
-        let mut angle = measured_angle.map_or(0.0, |a| a[0]);
+        let mut s = w.initial_state(&rec, data);
         let mut out_i = Vec::with_capacity(n);
         let mut out_w = Vec::with_capacity(n);
-        // Without the measured angle the ripple's and cogging's phase is unknown: far above
-        // the sample rate they are a spread of the sampled speed, not a value to replay.
-        let spread = measured_angle.is_none() && (on.ripple || on.cogging);
-        let mut var_w = vec![0.0; if spread { n } else { 0 }];
-        let mut swing = 0.0;
-        let current_at_row = data.input_timing == InputTiming::At && !on.lowpass;
+        let mut var_w = vec![0.0; if rec.spread { n } else { 0 }];
         for k in 0..n {
-            // The sample at t_k shows the current of the previous step: the command of
-            // step k acts from t_k on (zero-order hold). Recorded `At` the command, the
-            // driver's algebraic current already follows it.
-            if current_at_row {
-                for _ in 0..3 {
-                    current = p.drive_gain * (command[k] + w.feedback(current, speed));
-                }
-            }
-            out_i.push(current);
-            out_w.push(speed);
+            w.show(&rec, k, &mut s);
+            out_i.push(s.current);
+            out_w.push(s.speed);
             if k + 1 == n {
                 break;
             }
-            let v = command[k];
-            let dt = data.t[k + 1] - data.t[k];
-            let visc = w.viscous_at(temperature.map_or(w.reference_temperature, |t| t[k]));
-            let extra = if on.noise {
-                p.inertia
-                    * p.noise_angle
-                    * p.noise_frequency
-                    * p.noise_frequency
-                    * (p.noise_frequency * (data.t[k] + 0.5 * dt) + w.noise_phase).sin()
-            } else {
-                0.0
-            };
-            // Sub-steps keep RK4 accurate for a fast driver (w_d h <= 1, inside its
-            // stability limit 2.8) and let the limiter feedback follow the speed.
-            let substeps = if on.lowpass {
-                (p.driver_bandwidth * dt).ceil().max(1.0) as usize
-            } else if on.emf || on.limiter {
-                4
-            } else {
-                1
-            };
-            let h = dt / substeps as f64;
-            let algebraic = |current: &mut f64, speed: f64| {
-                for _ in 0..3 {
-                    *current = p.drive_gain * (v + w.feedback(*current, speed));
-                }
-            };
-            if !on.lowpass {
-                algebraic(&mut current, speed);
+            let variance;
+            (s, variance) = w.advance(&rec, k, s);
+            if let Some(v) = var_w.get_mut(k + 1) {
+                *v = variance;
             }
-            let (i0, w0) = (current, speed);
-            for sub in 0..substeps {
-                if !on.lowpass && sub > 0 {
-                    algebraic(&mut current, speed);
-                }
-                let (ci, cw) = (current, speed);
-                let (a1, b1) = w.rhs(ci, cw, visc, v, extra);
-                let (a2, b2) = w.rhs(ci + 0.5 * h * a1, cw + 0.5 * h * b1, visc, v, extra);
-                let (a3, b3) = w.rhs(ci + 0.5 * h * a2, cw + 0.5 * h * b2, visc, v, extra);
-                let (a4, b4) = w.rhs(ci + h * a3, cw + h * b3, visc, v, extra);
-                current = ci + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4);
-                speed = cw + h / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4);
-            }
-            if let Some(a) = measured_angle {
-                angle = a[k];
-            }
-            // The ripple's swing left out, as the truth wheel does (`ripple_step`).
-            let mean_speed = 0.5 * (w0 + speed) - swing;
-            if spread {
-                var_w[k + 1] = unknown_phase_variance(
-                    p,
-                    on.ripple,
-                    on.cogging,
-                    0.5 * (i0 + current),
-                    mean_speed,
-                    dt,
-                );
-                angle += mean_speed * dt;
-                if !(speed.is_finite() && current.is_finite()) {
-                    return Err(format!("replay diverged at t = {}", data.t[k]));
-                }
-                continue;
-            }
-            // The measured angle pins the phase at the step's end too: otherwise a replayed
-            // speed error dw puts the ripple 3 N dw dt off (5 rad for 1 rad/s at 20 Hz), and
-            // the fitted ripple itself moves the speed. Taken within half a turn of the
-            // replayed end, so the whole turns between samples follow the replayed speed.
-            let predicted_end = angle + mean_speed * dt;
-            let angle_end = match measured_angle {
-                Some(a) if a[k + 1].is_finite() => {
-                    let turn = std::f64::consts::TAU;
-                    let off = (a[k + 1] - predicted_end).rem_euclid(turn);
-                    predicted_end + if off > 0.5 * turn { off - turn } else { off }
-                }
-                _ => predicted_end,
-            };
-            // Ripple and cogging oscillate far above the sample rate: exact integral of
-            // sin(k theta) over the step at the mean speed.
-            let torques = RippleTorques {
-                ripple: if on.ripple {
-                    p.torque_constant * 0.5 * (i0 + current) * p.torque_ripple
-                } else {
-                    0.0
-                },
-                cogging: if on.cogging { p.cogging } else { 0.0 },
-                poles: p.poles,
-                inertia: p.inertia,
-            };
-            let (change, swing_end) = ripple_step(&torques, angle, angle_end, mean_speed, dt);
-            speed += change;
-            swing = swing_end;
-            angle = angle_end.rem_euclid(std::f64::consts::TAU);
-            if !(speed.is_finite() && current.is_finite()) {
+            if !(s.speed.is_finite() && s.current.is_finite()) {
                 return Err(format!("replay diverged at t = {}", data.t[k]));
             }
         }
@@ -578,12 +742,22 @@ impl GapPlant for WheelGapPlant {
         Ok(Simulation {
             outputs: vec![out_i, out_w],
             states,
-            variances: if spread {
+            variances: if rec.spread {
                 vec![None, Some(var_w)]
             } else {
                 Vec::new()
             },
         })
+    }
+
+    fn estimate(
+        &self,
+        params: &Params,
+        active: &[&str],
+        data: &PlantData,
+        sensors: &Sensors,
+    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+        Some(estimate_wheel(params, active, data, sensors))
     }
 
     fn initial_window(&self) -> f64 {

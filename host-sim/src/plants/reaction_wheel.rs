@@ -115,7 +115,9 @@ impl TruthWheel {
         self.ripple_swing = 0.0;
     }
 
-    fn viscous(&self, temperature_c: f64) -> f64 {
+    /// The viscous coefficient acting at `temperature_c` (frozen at
+    /// [`FROZEN_VISCOUS_TEMPERATURE_C`] unless `viscous_temperature` is on).
+    pub fn viscous(&self, temperature_c: f64) -> f64 {
         let t = if self.effects.viscous_temperature {
             temperature_c
         } else {
