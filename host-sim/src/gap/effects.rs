@@ -956,8 +956,7 @@ impl<'a> Problem<'a> {
             .collect()
     }
 
-    /// RMS over truth columns (each scaled by its own std over the data, a constant one by
-    /// its value) of the replayed states' error on the held-out samples; `None` without
+    /// RMS over truth columns (each relative to its own RMS over the data) of the replayed states' error on the held-out samples; `None` without
     /// truth columns in common.
     pub fn truth_error(&self, sim: &Simulation) -> Option<f64> {
         self.states_error(&sim.states)
@@ -972,17 +971,11 @@ impl<'a> Problem<'a> {
                 continue;
             };
             let finite: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
-            let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
-            let var =
-                finite.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / finite.len().max(1) as f64;
-            // A constant column (a parameter) is scored by its relative error.
-            let scale = if var > (1e-9 * mean).powi(2) {
-                var.sqrt()
-            } else if mean != 0.0 {
-                mean.abs()
-            } else {
-                1.0
-            };
+            // Relative to the column's RMS: a speed to its swing, a parameter (constant, or
+            // moving a little with temperature) to its value; an all-zero column absolutely.
+            let rms = (finite.iter().map(|v| v * v).sum::<f64>() / finite.len().max(1) as f64)
+                .sqrt();
+            let scale = if rms > 0.0 { rms } else { 1.0 };
             for k in 0..x.len() {
                 if self.test[k] && x[k].is_finite() && est[k].is_finite() {
                     acc += ((x[k] - est[k]) / scale).powi(2);
