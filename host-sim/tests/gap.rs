@@ -782,6 +782,26 @@ fn gap_finds_both_external_leaks_in_progpy_default_state_trace() {
     }
 }
 
+#[test]
+fn on_progpys_friction_trace_the_valve_estimator_is_closer_with_the_effect_added() {
+    // progpy's r = 9000 N s/m trace (truth columns x:x ... x:r, x:k) against our model at
+    // r = 6000: the project's valve estimator runs with the user's model and with the
+    // verdict's fitted friction, and is scored on the truth columns it estimates.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/progpy-valve");
+    let v = gap_with_meta(
+        &root.join("friction_r9000_dt0.01.csv"),
+        &root.join("gap/friction_r9000.meta.toml"),
+        &scratch("progpy-friction-estimator").join("out"),
+    );
+    assert_eq!(v["verdict"], "friction_increase");
+    let top = &v["ranking"][0];
+    let before = top["estimation_error_before"].as_f64().unwrap();
+    let after = top["estimation_error_after"].as_f64().unwrap();
+    // Measured 0.138 -> 0.117 (the tracked r: 21 % -> 6 % off).
+    assert!(after < 0.9 * before, "{before} -> {after}");
+    assert!(after < 0.2, "{after}");
+}
+
 fn assert_external_leaks(v: &serde_json::Value) {
     assert_eq!(v["verdict"], "top_external_leak+bottom_external_leak");
     let pair = v["pairs"]

@@ -861,8 +861,8 @@ impl BenchPlant for ValveBench {
         let sim = simulate_valve(&params, &active, &data, &extras).unwrap_or_default();
         let mut states: Vec<(String, Vec<f64>)> = sim.states.into_iter().collect();
         // The damage the valve's estimator tracks, constant in the truth.
-        for name in crate::gap::valve::ESTIMATED_DAMAGE {
-            states.push((name.to_string(), vec![params[name]; data.len()]));
+        for (state, param) in crate::gap::valve::ESTIMATED_DAMAGE {
+            states.push((state.to_string(), vec![params[param]; data.len()]));
         }
         Clean {
             t: data.t.clone(),

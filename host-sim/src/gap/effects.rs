@@ -973,8 +973,8 @@ impl<'a> Problem<'a> {
             let finite: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
             // Relative to the column's RMS: a speed to its swing, a parameter (constant, or
             // moving a little with temperature) to its value; an all-zero column absolutely.
-            let rms = (finite.iter().map(|v| v * v).sum::<f64>() / finite.len().max(1) as f64)
-                .sqrt();
+            let rms =
+                (finite.iter().map(|v| v * v).sum::<f64>() / finite.len().max(1) as f64).sqrt();
             let scale = if rms > 0.0 { rms } else { 1.0 };
             for k in 0..x.len() {
                 if self.test[k] && x[k].is_finite() && est[k].is_finite() {

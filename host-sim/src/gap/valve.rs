@@ -17,11 +17,11 @@
 //! choked regime and fits `b`, which the isentropic nozzle puts at 0.528 and real orifices
 //! lower.
 
+use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
 use crate::gap::plant::{
     EffectSpec, GapPlant, InputTiming, ParamSpec, Params, PlantData, Regime, Scale, Side,
     Simulation, param,
 };
-use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
 use nalgebra::{SVector, Vector1, Vector4};
 use prognos_core::plants::valve::{Choking, Contact, Integrator, NU, NX, ValveParams, idx};
 use std::collections::BTreeMap;
@@ -289,17 +289,25 @@ pub fn simulate_valve(
     let mut s = rec.initial_state(params, data);
     let n = data.len();
     let mut out: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(n)).collect();
-    let mut velocity = Vec::with_capacity(n);
+    let (mut velocity, mut m_top, mut m_bot) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
     for k in 0..n {
         let o = rec.vp.outputs(&s, &rec.input(k));
         for (c, v) in out.iter_mut().zip(o) {
             c.push(v);
         }
         velocity.push(s[idx::V]);
+        m_top.push(s[idx::M_TOP]);
+        m_bot.push(s[idx::M_BOT]);
         if k + 1 == n {
             break;
         }
-        s = rec.vp.advance(&s, &rec.input(k + 1), data.t[k + 1] - data.t[k]);
+        s = rec
+            .vp
+            .advance(&s, &rec.input(k + 1), data.t[k + 1] - data.t[k]);
         if !s.iter().all(|v| v.is_finite()) {
             return Err(format!("replay diverged at t = {}", data.t[k]));
         }
@@ -307,6 +315,8 @@ pub fn simulate_valve(
     let mut states = BTreeMap::new();
     states.insert("x".to_string(), out[0].clone());
     states.insert("v".to_string(), velocity);
+    states.insert("m_top".to_string(), m_top);
+    states.insert("m_bot".to_string(), m_bot);
     Ok(Simulation {
         outputs: out,
         states,
@@ -314,13 +324,15 @@ pub fn simulate_valve(
     })
 }
 
-/// The damage the valve's estimator tracks, by parameter name.
-pub const ESTIMATED_DAMAGE: [&str; 2] = ["friction", "spring"];
+/// The damage the valve's estimator tracks: its state name (progpy's, as the reference
+/// traces' truth columns `x:r`, `x:k` spell it) and the model parameter it starts from.
+pub const ESTIMATED_DAMAGE: [(&str, &str); 2] = [("r", "friction"), ("k", "spring")];
 
 /// The valve's estimator: the core's UKF on the valve's position, velocity and gas masses
 /// with the sliding damage of the valve paper (friction `r`, spring `k`) tracked as random
-/// walks, the leak areas at the model's values. Estimates of `x`, `v`, `friction` and
-/// `spring`: an unmodelled effect shows as the damage drifting to absorb it.
+/// walks, the leak areas at the model's values. Estimates of `x`, `v`, `m_top`, `m_bot`,
+/// `r` and `k` (the truth columns of progpy's traces): an unmodelled effect shows as the
+/// damage drifting to absorb it.
 pub fn estimate_valve(
     params: &Params,
     active: &[&str],
@@ -330,7 +342,11 @@ pub fn estimate_valve(
     /// Estimated: position, velocity, both gas masses, friction, spring.
     const EST: [usize; 6] = [idx::X, idx::V, idx::M_TOP, idx::M_BOT, idx::R, idx::K];
     let extras = TruthExtras::default();
-    let rec = ValveRecord::new(params, active, data, &extras)?;
+    let mut rec = ValveRecord::new(params, active, data, &extras)?;
+    // Always the semi-implicit step: progpy's explicit Euler is stable only while
+    // r h / m < 2 (1.8 at r = 9000 and its 0.01 s step), and sigma points with a larger
+    // friction would oscillate without bound.
+    rec.vp.integrator = Integrator::SemiImplicit;
     let full0 = rec.initial_state(params, data);
     let vp = &rec.vp;
     let hard_stops = vp.contact == Contact::HardStops;
@@ -372,10 +388,10 @@ pub fn estimate_valve(
     // A gas mass is as uncertain as its chamber's pressure reading (1 kPa without one).
     let x = full0[idx::X];
     let dp = |c: usize| sigma(c).unwrap_or(1e3);
-    let top_sd = vp.mass_top_for(x, vp.pressure_top(x, full0[idx::M_TOP]) + dp(1))
-        - full0[idx::M_TOP];
-    let bottom_sd = vp.mass_bottom_for(x, vp.pressure_bottom(x, full0[idx::M_BOT]) + dp(2))
-        - full0[idx::M_BOT];
+    let top_sd =
+        vp.mass_top_for(x, vp.pressure_top(x, full0[idx::M_TOP]) + dp(1)) - full0[idx::M_TOP];
+    let bottom_sd =
+        vp.mass_bottom_for(x, vp.pressure_bottom(x, full0[idx::M_BOT]) + dp(2)) - full0[idx::M_BOT];
     let sd0 = SVector::<f64, 6>::from([
         sigma(0).unwrap_or(1e-4),
         1e-3,
@@ -385,14 +401,8 @@ pub fn estimate_valve(
         0.1 * x0[5].abs(),
     ]);
     let dt = data.dt.max(1e-12);
-    let sd_per_sample = SVector::<f64, 6>::from([
-        0.1 * sd0[0],
-        1e-4,
-        0.1 * sd0[2],
-        0.1 * sd0[3],
-        0.0,
-        0.0,
-    ]);
+    let sd_per_sample =
+        SVector::<f64, 6>::from([0.1 * sd0[0], 1e-4, 0.1 * sd0[2], 0.1 * sd0[3], 0.0, 0.0]);
     // The model is trusted to a tenth of each reading's noise per sample; the damage may
     // move by 1 % in 10 s.
     let mut q_rate = sd_per_sample.component_mul(&sd_per_sample) / dt;
@@ -416,8 +426,10 @@ pub fn estimate_valve(
     let names = [
         ("x", 0),
         ("v", 1),
-        (ESTIMATED_DAMAGE[0], 4),
-        (ESTIMATED_DAMAGE[1], 5),
+        ("m_top", 2),
+        ("m_bot", 3),
+        (ESTIMATED_DAMAGE[0].0, 4),
+        (ESTIMATED_DAMAGE[1].0, 5),
     ];
     run_ukf::<_, _, 6, 13, 1, 4>(
         &model,
@@ -537,11 +549,15 @@ mod tests {
             ..Default::default()
         };
         data.t = (0..n).map(|k| k as f64 * dt).collect();
-        let open: Vec<f64> = (0..n).map(|k| f64::from(k >= 40 && (k / 80) % 2 == 0)).collect();
+        let open: Vec<f64> = (0..n)
+            .map(|k| f64::from(k >= 40 && (k / 80) % 2 == 0))
+            .collect();
         data.inputs.insert("pl".into(), vec![3.5e5; n]);
         data.inputs.insert("pr".into(), vec![1.5e5; n]);
-        data.inputs
-            .insert("top_port_supply".into(), open.iter().map(|o| 1.0 - o).collect());
+        data.inputs.insert(
+            "top_port_supply".into(),
+            open.iter().map(|o| 1.0 - o).collect(),
+        );
         data.inputs.insert("bottom_port_supply".into(), open);
         let mut truth_params = ValveGapPlant.default_params();
         truth_params.insert("friction".into(), friction);
@@ -571,7 +587,7 @@ mod tests {
         let (data, truth, sensors) = cycled(9000.0, 11);
         let params = ValveGapPlant.default_params();
         let est = estimate_valve(&params, &[], &data, &sensors).unwrap();
-        let friction = est["friction"].last().copied().unwrap();
+        let friction = est["r"].last().copied().unwrap();
         assert!((friction - 9000.0).abs() < 0.02 * 9000.0, "{friction}");
         let x_error = rms_error(&est["x"], &truth["x"]);
         assert!(x_error < 1e-4, "{x_error}");
@@ -584,8 +600,11 @@ mod tests {
         let est = estimate_valve(&params, &[], &data, &sensors).unwrap();
         let x_error = rms_error(&est["x"], &truth["x"]);
         let reading_error = rms_error(&data.outputs["x"], &truth["x"]);
-        assert!(x_error < 0.3 * reading_error, "{x_error} vs {reading_error}");
-        let friction = est["friction"].last().copied().unwrap();
+        assert!(
+            x_error < 0.3 * reading_error,
+            "{x_error} vs {reading_error}"
+        );
+        let friction = est["r"].last().copied().unwrap();
         assert!((friction - 6000.0).abs() < 0.02 * 6000.0, "{friction}");
     }
 }

@@ -17,11 +17,11 @@
 //! `lubricant_torque_noise` (`J theta_a w_a^2 sin(w_a t + phase)`), `viscous_temperature`
 //! (`c_v(T) = c_v(T_ref) - viscous_slope (T - T_ref)`, the paper's `c0 - c1 (T + 30)`).
 
+use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
 use crate::gap::plant::{
     EffectSpec, FitRange, GapPlant, InputTiming, MotionThresholds, ParamSpec, Params, PlantData,
     Regime, Scale, Side, Simulation, motion_regimes, param,
 };
-use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
 use crate::plants::reaction_wheel::{RippleTorques, ripple_step};
 use nalgebra::{Vector1, Vector2, Vector4};
 use prognos_core::plants::reaction_wheel::WheelParams;
@@ -448,7 +448,8 @@ impl Wheel {
     fn show(&self, rec: &Record, k: usize, s: &mut WheelState) {
         if rec.current_at_row {
             for _ in 0..3 {
-                s.current = self.p.drive_gain * (rec.command[k] + self.feedback(s.current, s.speed));
+                s.current =
+                    self.p.drive_gain * (rec.command[k] + self.feedback(s.current, s.speed));
             }
         }
     }
@@ -581,7 +582,12 @@ pub fn estimate_wheel(
     if rec.spread {
         // A ripple of unknown phase is read as the spread it adds to the sampled speed.
         let replay = WheelGapPlant.simulate(params, active, data)?;
-        let spread = replay.variances.get(1).cloned().flatten().unwrap_or_default();
+        let spread = replay
+            .variances
+            .get(1)
+            .cloned()
+            .flatten()
+            .unwrap_or_default();
         let mean = spread.iter().sum::<f64>() / spread.len().max(1) as f64;
         if let Some(c) = sensors.channels.get_mut(1) {
             c.sigma = (c.sigma * c.sigma + mean).sqrt();
@@ -620,7 +626,12 @@ pub fn estimate_wheel(
     let c_v = wheel.viscous;
     let setup = FilterSetup {
         x0: Vector4::new(start.current, start.speed, 0.0, c_v),
-        p0: Vector4::new(variance(0), variance(1), 1e-6 * variance(1), (0.1 * c_v).powi(2)),
+        p0: Vector4::new(
+            variance(0),
+            variance(1),
+            1e-6 * variance(1),
+            (0.1 * c_v).powi(2),
+        ),
         // The model is trusted to a tenth of each sensor's noise per sample (the driver's
         // algebraic current, without its lag, to a hundredth of that); c_v may move by
         // 1 % in 10 s.
@@ -631,7 +642,12 @@ pub fn estimate_wheel(
             (0.01 * c_v).powi(2) / 10.0,
         ),
         bounds: Some((
-            Vector4::new(f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY, floor),
+            Vector4::new(
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+                floor,
+            ),
             Vector4::new(f64::INFINITY, f64::INFINITY, f64::INFINITY, 100.0 * c_v),
         )),
     };
@@ -649,7 +665,9 @@ pub fn estimate_wheel(
     )?;
     if let Some(c) = est.get_mut("viscous_coefficient") {
         for (k, c) in c.iter_mut().enumerate() {
-            let temperature = rec.temperature.map_or(wheel.reference_temperature, |t| t[k]);
+            let temperature = rec
+                .temperature
+                .map_or(wheel.reference_temperature, |t| t[k]);
             let mut w = wheel;
             w.viscous = *c;
             *c = w.viscous_at(temperature);
@@ -997,7 +1015,10 @@ mod tests {
         params.insert("viscous_coefficient".into(), 1.1 * truth_viscous);
         let est = estimate_wheel(&params, &[], &data, &Sensors { channels }).unwrap();
         let c_v = est["viscous_coefficient"][n - 1];
-        assert!((c_v / truth_viscous - 1.0).abs() < 0.01, "{c_v} vs {truth_viscous}");
+        assert!(
+            (c_v / truth_viscous - 1.0).abs() < 0.01,
+            "{c_v} vs {truth_viscous}"
+        );
         let rms = |a: &[f64]| {
             (a.iter().zip(&w).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n as f64).sqrt()
         };
