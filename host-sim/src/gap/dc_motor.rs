@@ -11,7 +11,7 @@
 //! Its estimator ([`estimate_motor`], the core's UKF on the same equations) shows how a
 //! plant reports the downstream estimation error of its truth columns.
 
-use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
+use crate::gap::estimate::{Estimates, FilterSetup, Sensors, StepModel, run_ukf};
 use crate::gap::plant::{
     EffectSpec, GapPlant, ParamSpec, Params, PlantData, Regime, Scale, Simulation, motion_regimes,
     param, substeps_for,
@@ -203,7 +203,7 @@ pub fn estimate_motor(
     active: &[&str],
     data: &PlantData,
     sensors: &Sensors,
-) -> Result<BTreeMap<String, Vec<f64>>, String> {
+) -> Result<Estimates, String> {
     let motor = MotorDynamics::new(params, active)?;
     let max_step = param(params, "max_step");
     let voltage = data.input("voltage").ok_or("missing u:voltage")?;
@@ -292,7 +292,7 @@ impl GapPlant for DcMotorPlant {
         active: &[&str],
         data: &PlantData,
         sensors: &Sensors,
-    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+    ) -> Option<Result<Estimates, String>> {
         Some(estimate_motor(params, active, data, sensors))
     }
 

@@ -116,6 +116,9 @@ pub struct Diagnosis {
     pub input_timing: TimingChoice,
     /// Every test behind `where`.
     pub tests: Vec<crate::gap::analysis::TestResult>,
+    /// The plant estimator's innovations with the user's model, tested (`None`: the plant
+    /// has no estimator).
+    pub estimator: Option<crate::gap::analysis::EstimatorCheck>,
     /// Heat-map cells.
     #[serde(skip)]
     pub cells: Vec<crate::gap::analysis::Cell>,
@@ -521,7 +524,12 @@ fn diagnose_timed(
             held_out_blocks = "even (from 2)";
         }
     }
-    problem.add_estimation_errors(&mut ranking, &mut pairs);
+    let user_estimates = problem.run_estimator(&[]);
+    let estimator = user_estimates.as_ref().map(|run| match run {
+        Ok(e) => crate::gap::analysis::innovation_tests(&problem, &e.innovations),
+        Err(message) => crate::gap::analysis::EstimatorCheck::failed(message),
+    });
+    problem.add_estimation_errors(&mut ranking, &mut pairs, user_estimates.as_ref());
     let chosen = ranking.iter().chain(&pairs).find(|e| e.effect == verdict);
     if let Some(channel) = chosen.and_then(|e| signature_channel(&problem, e)) {
         // The gap lies where the explaining effect changes the model most, in noise units
@@ -552,6 +560,7 @@ fn diagnose_timed(
         held_out_blocks,
         input_timing: timing,
         tests: report.tests.clone(),
+        estimator,
         cells: report.cells.clone(),
         spectrum: report.spectrum.clone(),
         overlays,
@@ -969,7 +978,7 @@ impl GapPlant for SelectPlant<'_> {
         active: &[&str],
         data: &PlantData,
         sensors: &crate::gap::estimate::Sensors,
-    ) -> Option<Result<std::collections::BTreeMap<String, Vec<f64>>, String>> {
+    ) -> Option<Result<crate::gap::estimate::Estimates, String>> {
         // The estimator reads every output of the plant: the unmeasured ones never.
         let mut all = crate::gap::estimate::Sensors {
             channels: (0..self.inner.outputs().len())
@@ -979,7 +988,16 @@ impl GapPlant for SelectPlant<'_> {
         for (sensor, &i) in sensors.channels.iter().zip(&self.select) {
             all.channels[i] = sensor.clone();
         }
-        self.inner.estimate(params, active, data, &all)
+        let estimates = self.inner.estimate(params, active, data, &all)?;
+        Some(estimates.map(|mut e| {
+            let mut all = std::mem::take(&mut e.innovations);
+            e.innovations = self
+                .select
+                .iter()
+                .map(|&i| all.get_mut(i).map(std::mem::take).unwrap_or_default())
+                .collect();
+            e
+        }))
     }
     fn model_effects(&self, params: &crate::gap::plant::Params) -> Vec<&'static str> {
         self.inner.model_effects(params)

@@ -10,7 +10,7 @@
 //! method would stall. Scores are held-out Gaussian log-likelihoods (per-channel variance
 //! from the training residuals) minus `k/2 ln n_train` (BIC-like).
 
-use crate::gap::estimate::{ChannelSensor, Sensors};
+use crate::gap::estimate::{ChannelSensor, Estimates, Sensors};
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use crate::gap::start::{StartSensitivity, refit_start, start_sensitivities};
 use crate::gap::stats::{holm, variance_ratio_p};
@@ -552,6 +552,18 @@ impl<'a> Problem<'a> {
         if self.data.truth.is_empty() {
             return None;
         }
+        Some(
+            self.run_estimator(fitted)?
+                .and_then(|e| self.estimates_error(&e)),
+        )
+    }
+
+    /// The plant's estimator over the record with `fitted` in its model and sensors
+    /// (`None`: the plant has none).
+    pub fn run_estimator(
+        &self,
+        fitted: &[(Component, Vec<f64>)],
+    ) -> Option<Result<Estimates, String>> {
         let (params, active) = self.model_with(fitted);
         let channels = (0..self.outputs.len())
             .map(|ch| {
@@ -565,22 +577,32 @@ impl<'a> Problem<'a> {
                 ChannelSensor::new(&self.measured[ch], self.sigma[ch], self.data.dt, &effects)
             })
             .collect();
-        let estimates = self
-            .plant
-            .estimate(&params, &active, self.data, &Sensors { channels })?;
-        Some(estimates.and_then(|states| {
-            self.states_error(&states)
-                .ok_or_else(|| "no truth column is an estimated state".to_string())
-        }))
+        self.plant
+            .estimate(&params, &active, self.data, &Sensors { channels })
+    }
+
+    /// [`Problem::states_error`] of an estimator's run.
+    fn estimates_error(&self, estimates: &Estimates) -> Result<f64, String> {
+        self.states_error(&estimates.states)
+            .ok_or_else(|| "no truth column is an estimated state".to_string())
     }
 
     /// Fills [`Evaluation::estimation_error_before`] and `_after` of the reported ranking
-    /// and pairs (the estimator runs once per candidate, the user's model once).
-    pub fn add_estimation_errors(&self, ranking: &mut [Evaluation], pairs: &mut [Evaluation]) {
-        let Some(before) = self.estimation_error(&[]) else {
+    /// and pairs from `user` (the estimator's run with the user's model, made once by the
+    /// caller) and one run per candidate; nothing without truth columns.
+    pub fn add_estimation_errors(
+        &self,
+        ranking: &mut [Evaluation],
+        pairs: &mut [Evaluation],
+        user: Option<&Result<Estimates, String>>,
+    ) {
+        let Some(user) = user.filter(|_| !self.data.truth.is_empty()) else {
             return;
         };
-        let before = before.ok();
+        let before = user
+            .as_ref()
+            .ok()
+            .and_then(|e| self.estimates_error(e).ok());
         for e in ranking.iter_mut().chain(pairs.iter_mut()) {
             e.estimation_error_before = before;
             e.estimation_error_after = self.estimation_error(&e.fitted).and_then(Result::ok);

@@ -120,6 +120,17 @@ pub struct Sensors {
     pub channels: Vec<ChannelSensor>,
 }
 
+/// What a plant's estimator made of a record.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Estimates {
+    /// State estimates after each sample, by state name (as truth columns `x:<name>`).
+    pub states: BTreeMap<String, Vec<f64>>,
+    /// Per output channel (the plant's order), each sample's innovation over its predicted
+    /// standard deviation, `nu / sqrt(S)`: standard normal and white when the model and its
+    /// noise are right; NaN where there was no reading or it could not be fused.
+    pub innovations: Vec<Vec<f64>>,
+}
+
 /// A plant's one-step model for [`run_ukf`]: `step(x, u, dt)` from one sample to the next,
 /// `outputs(x, k)` the model's outputs at sample `k` in the plant's order (a plant whose
 /// outputs read an input takes it from the record's row `k`).
@@ -175,8 +186,8 @@ pub struct FilterSetup<const NX: usize> {
 /// Runs the core's UKF over a record of `n` samples at times `t`: predict with `inputs(k)`
 /// (the input over the step from sample `k` to `k + 1`), then fuse each channel's reading
 /// at the new sample. Returns the estimate after each sample, as `names` (state name,
-/// index) select. A failed prediction ends the run with its time; a failed update skips
-/// that reading (the filter stays as it was).
+/// index) select, and every reading's standardised innovation. A failed prediction ends
+/// the run with its time; a failed update skips that reading (the filter stays as it was).
 pub fn run_ukf<F, H, const NX: usize, const NS: usize, const NU: usize, const NY: usize>(
     model: &StepModel<F, H>,
     setup: &FilterSetup<NX>,
@@ -184,7 +195,7 @@ pub fn run_ukf<F, H, const NX: usize, const NS: usize, const NU: usize, const NY
     inputs: impl Fn(usize) -> SVector<f64, NU>,
     sensors: &Sensors,
     names: &[(&str, usize)],
-) -> Result<BTreeMap<String, Vec<f64>>, String>
+) -> Result<Estimates, String>
 where
     F: Fn(&SVector<f64, NX>, &SVector<f64, NU>, f64) -> SVector<f64, NX>,
     H: Fn(&SVector<f64, NX>, usize) -> SVector<f64, NY>,
@@ -203,6 +214,7 @@ where
     )
     .map_err(|e| format!("the estimator cannot start: {e}"))?;
     let mut out: Vec<Vec<f64>> = names.iter().map(|_| Vec::with_capacity(t.len())).collect();
+    let mut innovations = vec![vec![f64::NAN; t.len()]; NY];
     for k in 0..t.len() {
         if k > 0 {
             let dt = t[k] - t[k - 1];
@@ -226,7 +238,12 @@ where
             };
             // A reading the filter cannot fuse (a covariance that lost definiteness) is
             // skipped; the estimate stays where it was.
-            let _ = ukf.update(&observe, &u, &[y], &r);
+            if let Ok(report) = ukf.update(&observe, &u, &[y], &r) {
+                let s = report.innovation_cov[(0, 0)];
+                if s > 0.0 {
+                    innovations[channel][k] = report.innovation[0] / s.sqrt();
+                }
+            }
         }
         if let Some((lo, hi)) = &setup.bounds {
             let clamped = ukf
@@ -239,11 +256,14 @@ where
             o.push(ukf.state()[*i]);
         }
     }
-    Ok(names
-        .iter()
-        .zip(out)
-        .map(|((name, _), v)| (name.to_string(), v))
-        .collect())
+    Ok(Estimates {
+        states: names
+            .iter()
+            .zip(out)
+            .map(|((name, _), v)| (name.to_string(), v))
+            .collect(),
+        innovations,
+    })
 }
 
 #[cfg(test)]
@@ -301,13 +321,15 @@ mod tests {
                 p = f * p * f.transpose() + q;
             }
             let s = p[(0, 0)] + 0.0025;
+            let innovation = (measured[k] - x[0]) / s.sqrt();
+            assert!((est.innovations[0][k] - innovation).abs() < 1e-9, "{k}");
             let gain = Vector2::new(p[(0, 0)], p[(1, 0)]) / s;
             x += gain * (measured[k] - x[0]);
             p -= gain * Vector2::new(p[(0, 0)], p[(0, 1)]).transpose();
-            assert!((est["position"][k] - x[0]).abs() < 1e-9, "{k}");
-            assert!((est["velocity"][k] - x[1]).abs() < 1e-9, "{k}");
+            assert!((est.states["position"][k] - x[0]).abs() < 1e-9, "{k}");
+            assert!((est.states["velocity"][k] - x[1]).abs() < 1e-9, "{k}");
         }
-        assert!((est["velocity"][n - 1] - 0.5).abs() < 0.01);
+        assert!((est.states["velocity"][n - 1] - 0.5).abs() < 0.01);
     }
 
     #[test]

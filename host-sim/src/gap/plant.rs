@@ -11,7 +11,7 @@
 //! To add a plant: implement the trait (see [`crate::gap::dc_motor`] for a complete worked
 //! example) and add it to [`builtin_plant`].
 
-use crate::gap::estimate::Sensors;
+use crate::gap::estimate::{Estimates, Sensors};
 use std::collections::BTreeMap;
 
 /// How a parameter is searched between its bounds.
@@ -432,7 +432,7 @@ pub trait GapPlant: Sync {
         _active: &[&str],
         _data: &PlantData,
         _sensors: &Sensors,
-    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+    ) -> Option<Result<Estimates, String>> {
         None
     }
 

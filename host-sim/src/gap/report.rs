@@ -1,9 +1,11 @@
 //! The diagnosis written out: `verdict.json`, `report.md` and a self-contained
 //! `report.html` whose figures are inline SVG (residual heat map per channel and regime,
 //! residual spectrum with the flagged band, ranking bar chart, before/after overlays on a
-//! held-out block). Every file is written atomically.
+//! held-out block, and the heat map of the plant estimator's innovations). Every file is
+//! written atomically.
 
 use crate::error::SimError;
+use crate::gap::analysis::{Cell, EstimatorCheck, TestResult};
 use crate::gap::diagnose::{Diagnosis, Overlay};
 use crate::output::{write_json, write_text};
 use std::fmt::Write as _;
@@ -138,8 +140,36 @@ pub fn markdown(d: &Diagnosis) -> String {
             t.test, t.channel, t.scope, t.statistic, t.p_adjusted
         );
     }
+    if let Some(e) = &d.estimator {
+        s.push_str("\n## The plant's estimator with the user's model (innovations; reported, not used to decide)\n\n");
+        match &e.error {
+            Some(message) => {
+                let _ = writeln!(s, "The estimator could not run: {message}");
+            }
+            None => {
+                s.push_str(
+                    "| test | channel | scope | statistic | adjusted p |\n|---|---|---|---|---|\n",
+                );
+                for t in estimator_summary(e) {
+                    let _ = writeln!(
+                        s,
+                        "| {} | {} | {} | {:.3} | {:.3e} |",
+                        t.test, t.channel, t.scope, t.statistic, t.p_adjusted
+                    );
+                }
+            }
+        }
+    }
     s.push_str("\nFigures: see report.html.\n");
     s
+}
+
+/// The estimator's tests worth a line: each channel's overall `nis` and whiteness, and
+/// every regime rejected after Holm's correction.
+fn estimator_summary(e: &EstimatorCheck) -> impl Iterator<Item = &TestResult> {
+    e.tests.iter().filter(|t| {
+        t.scope == "all" || t.test == "ljung_box" || t.p_adjusted < crate::gap::analysis::ALPHA
+    })
 }
 
 fn color(v: f64) -> String {
@@ -149,15 +179,15 @@ fn color(v: f64) -> String {
     format!("rgb(255,{g},{g})")
 }
 
-fn heat_map(d: &Diagnosis) -> String {
+fn heat_map(cells: &[Cell]) -> String {
     let channels: Vec<&str> = {
-        let mut v: Vec<&str> = d.cells.iter().map(|c| c.channel.as_str()).collect();
+        let mut v: Vec<&str> = cells.iter().map(|c| c.channel.as_str()).collect();
         v.dedup();
         v
     };
     let regimes: Vec<&str> = {
         let mut v: Vec<&str> = Vec::new();
-        for c in &d.cells {
+        for c in cells {
             if !v.contains(&c.regime.as_str()) {
                 v.push(&c.regime);
             }
@@ -188,7 +218,7 @@ fn heat_map(d: &Diagnosis) -> String {
             esc(r)
         );
         for (j, c) in channels.iter().enumerate() {
-            if let Some(cell) = d.cells.iter().find(|x| x.channel == *c && x.regime == *r) {
+            if let Some(cell) = cells.iter().find(|x| x.channel == *c && x.regime == *r) {
                 let x = left + cw * j as f64;
                 let _ = write!(
                     s,
@@ -449,7 +479,31 @@ pub fn html_page(d: &Diagnosis) -> String {
         );
     }
     s.push_str("</table><h2>Residual per channel and regime</h2><p>Mean squared standardised residual (1 = noise level).</p>");
-    s.push_str(&heat_map(d));
+    s.push_str(&heat_map(&d.cells));
+    if let Some(e) = &d.estimator {
+        s.push_str("<h2>The plant's estimator with the user's model</h2><p>Mean squared standardised innovation per channel and regime (1 = consistent filter); reported beside the replay, not used to decide.</p>");
+        match &e.error {
+            Some(message) => {
+                let _ = write!(s, "<p>The estimator could not run: {}</p>", esc(message));
+            }
+            None => {
+                s.push_str("<table><tr><th>test</th><th>channel</th><th>scope</th><th>statistic</th><th>adjusted p</th></tr>");
+                for t in estimator_summary(e) {
+                    let _ = write!(
+                        s,
+                        "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3e}</td></tr>",
+                        esc(&t.test),
+                        esc(&t.channel),
+                        esc(&t.scope),
+                        t.statistic,
+                        t.p_adjusted
+                    );
+                }
+                s.push_str("</table>");
+                s.push_str(&heat_map(&e.cells));
+            }
+        }
+    }
     s.push_str("<h2>Residual spectrum of the located channel</h2>");
     s.push_str(&spectrum_svg(d));
     s.push_str("<h2>Before / after on a held-out block</h2>");

@@ -17,7 +17,7 @@
 //! efficiencies *are* sensor scales of their channels, so they replace the generic
 //! `sensor_scale` there.
 
-use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
+use crate::gap::estimate::{Estimates, FilterSetup, Sensors, StepModel, run_ukf};
 use crate::gap::plant::{
     EffectSpec, GapPlant, MotionThresholds, ParamSpec, Params, PlantData, Regime, Scale,
     Simulation, motion_regimes, param, substeps_for,
@@ -352,7 +352,7 @@ pub fn estimate_scooter(
     params: &Params,
     data: &PlantData,
     sensors: &Sensors,
-) -> Result<BTreeMap<String, Vec<f64>>, String> {
+) -> Result<Estimates, String> {
     let (p, beta_r, beta_v) = checked_params(params)?;
     let max_step = param(params, "max_step");
     let voltage = data.input("voltage").ok_or("missing u:voltage")?;
@@ -448,7 +448,7 @@ impl GapPlant for ScooterGapPlant {
         _active: &[&str],
         data: &PlantData,
         sensors: &Sensors,
-    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+    ) -> Option<Result<Estimates, String>> {
         Some(estimate_scooter(params, data, sensors))
     }
 

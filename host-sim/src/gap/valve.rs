@@ -17,7 +17,7 @@
 //! choked regime and fits `b`, which the isentropic nozzle puts at 0.528 and real orifices
 //! lower.
 
-use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
+use crate::gap::estimate::{Estimates, FilterSetup, Sensors, StepModel, run_ukf};
 use crate::gap::plant::{
     EffectSpec, GapPlant, InputTiming, ParamSpec, Params, PlantData, Regime, Scale, Side,
     Simulation, param,
@@ -338,7 +338,7 @@ pub fn estimate_valve(
     active: &[&str],
     data: &PlantData,
     sensors: &Sensors,
-) -> Result<BTreeMap<String, Vec<f64>>, String> {
+) -> Result<Estimates, String> {
     /// Estimated: position, velocity, both gas masses, friction, spring.
     const EST: [usize; 6] = [idx::X, idx::V, idx::M_TOP, idx::M_BOT, idx::R, idx::K];
     let extras = TruthExtras::default();
@@ -504,7 +504,7 @@ impl GapPlant for ValveGapPlant {
         active: &[&str],
         data: &PlantData,
         sensors: &Sensors,
-    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+    ) -> Option<Result<Estimates, String>> {
         Some(estimate_valve(params, active, data, sensors))
     }
 

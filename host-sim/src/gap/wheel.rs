@@ -17,7 +17,7 @@
 //! `lubricant_torque_noise` (`J theta_a w_a^2 sin(w_a t + phase)`), `viscous_temperature`
 //! (`c_v(T) = c_v(T_ref) - viscous_slope (T - T_ref)`, the paper's `c0 - c1 (T + 30)`).
 
-use crate::gap::estimate::{FilterSetup, Sensors, StepModel, run_ukf};
+use crate::gap::estimate::{Estimates, FilterSetup, Sensors, StepModel, run_ukf};
 use crate::gap::plant::{
     EffectSpec, FitRange, GapPlant, InputTiming, MotionThresholds, ParamSpec, Params, PlantData,
     Regime, Scale, Side, Simulation, motion_regimes, param,
@@ -571,7 +571,7 @@ pub fn estimate_wheel(
     active: &[&str],
     data: &PlantData,
     sensors: &Sensors,
-) -> Result<BTreeMap<String, Vec<f64>>, String> {
+) -> Result<Estimates, String> {
     const CURRENT: usize = 0;
     const SPEED: usize = 1;
     const SWING: usize = 2;
@@ -663,7 +663,7 @@ pub fn estimate_wheel(
             ("viscous_coefficient", VISCOUS),
         ],
     )?;
-    if let Some(c) = est.get_mut("viscous_coefficient") {
+    if let Some(c) = est.states.get_mut("viscous_coefficient") {
         for (k, c) in c.iter_mut().enumerate() {
             let temperature = rec
                 .temperature
@@ -775,7 +775,7 @@ impl GapPlant for WheelGapPlant {
         active: &[&str],
         data: &PlantData,
         sensors: &Sensors,
-    ) -> Option<Result<BTreeMap<String, Vec<f64>>, String>> {
+    ) -> Option<Result<Estimates, String>> {
         Some(estimate_wheel(params, active, data, sensors))
     }
 
