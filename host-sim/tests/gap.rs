@@ -166,6 +166,31 @@ fn gap_says_none_on_nominal_motor_data() {
 }
 
 #[test]
+fn the_motor_estimators_innovations_are_white_on_nominal_data_and_not_with_friction() {
+    // The plant's estimator runs with the user's model on every record: on nominal data
+    // its innovations pass their tests, with an unmodelled Coulomb friction they do not.
+    let estimator_rejects = |d: &Dataset, name: &str| {
+        let dir = scratch(name);
+        let (out, v) = diagnose(&dir, d);
+        let tests = v["estimator"]["tests"].as_array().unwrap();
+        assert!(tests.iter().any(|t| t["test"] == "ljung_box"), "{tests:?}");
+        let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+        assert!(report.contains("The plant's estimator with the user's model"));
+        tests
+            .iter()
+            .any(|t| t["p_adjusted"].as_f64().unwrap() < 0.01)
+    };
+    let sets = generated("dc_motor", &["no-such-effect"], &[], 7, 1);
+    let none = sets
+        .iter()
+        .find(|x| x.label.kind == CaseKind::None)
+        .unwrap();
+    assert!(!estimator_rejects(none, "estimator-none"));
+    let friction = one("dc_motor", "coulomb_friction", 4.0);
+    assert!(estimator_rejects(&friction, "estimator-friction"));
+}
+
+#[test]
 fn gap_finds_the_scooter_encoder_efficiency_under_its_own_name() {
     // The rear encoder's efficiency is a sensor scale of y:rear_speed; the scooter names it,
     // so the generic candidate stands aside and the verdict is the plant's effect.

@@ -586,7 +586,9 @@ mod tests {
         // friction must be within 2 % of it, and the position within its noise.
         let (data, truth, sensors) = cycled(9000.0, 11);
         let params = ValveGapPlant.default_params();
-        let est = estimate_valve(&params, &[], &data, &sensors).unwrap();
+        let est = estimate_valve(&params, &[], &data, &sensors)
+            .unwrap()
+            .states;
         let friction = est["r"].last().copied().unwrap();
         assert!((friction - 9000.0).abs() < 0.02 * 9000.0, "{friction}");
         let x_error = rms_error(&est["x"], &truth["x"]);
@@ -597,7 +599,13 @@ mod tests {
     fn with_the_right_model_the_estimate_beats_the_readings() {
         let (data, truth, sensors) = cycled(6000.0, 12);
         let params = ValveGapPlant.default_params();
-        let est = estimate_valve(&params, &[], &data, &sensors).unwrap();
+        let run = estimate_valve(&params, &[], &data, &sensors).unwrap();
+        // A consistent filter: every channel's standardised innovations near unit variance.
+        for (c, z) in run.innovations.iter().enumerate() {
+            let nis = z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64;
+            assert!((0.8..1.25).contains(&nis), "channel {c}: {nis}");
+        }
+        let est = run.states;
         let x_error = rms_error(&est["x"], &truth["x"]);
         let reading_error = rms_error(&data.outputs["x"], &truth["x"]);
         assert!(

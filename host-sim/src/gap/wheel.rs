@@ -1013,7 +1013,9 @@ mod tests {
         }
         let mut params = WheelGapPlant.default_params();
         params.insert("viscous_coefficient".into(), 1.1 * truth_viscous);
-        let est = estimate_wheel(&params, &[], &data, &Sensors { channels }).unwrap();
+        let est = estimate_wheel(&params, &[], &data, &Sensors { channels })
+            .unwrap()
+            .states;
         let c_v = est["viscous_coefficient"][n - 1];
         assert!(
             (c_v / truth_viscous - 1.0).abs() < 0.01,
