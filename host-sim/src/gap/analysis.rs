@@ -51,6 +51,32 @@ pub struct TestResult {
     pub p_adjusted: f64,
 }
 
+impl TestResult {
+    /// A test's result before Holm's correction of its family.
+    fn unadjusted(test: &str, channel: &str, scope: String, statistic: f64, p: f64) -> Self {
+        Self {
+            test: test.into(),
+            channel: channel.into(),
+            scope,
+            statistic,
+            p_value: p.max(f64::MIN_POSITIVE),
+            p_adjusted: 1.0,
+        }
+    }
+}
+
+/// Mean of `z^2` over the finite samples `mask` selects, and their count.
+fn mean_square(z: &[f64], mask: &dyn Fn(usize) -> bool) -> (f64, usize) {
+    let (mut s, mut m) = (0.0, 0usize);
+    for (k, v) in z.iter().enumerate() {
+        if v.is_finite() && mask(k) {
+            s += v * v;
+            m += 1;
+        }
+    }
+    (s / m.max(1) as f64, m)
+}
+
 /// Residual summary of one channel and regime (the heat map's cell).
 #[derive(Clone, Debug, Serialize)]
 pub struct Cell {
@@ -219,25 +245,9 @@ pub fn innovation_tests(problem: &Problem, innovations: &[Vec<f64>]) -> Estimato
         };
         let channel = format!("y:{name}");
         let dof = problem.sigma_dof[c];
-        let nis = |mask: &dyn Fn(usize) -> bool| {
-            let (mut s, mut m) = (0.0, 0usize);
-            for (k, v) in z.iter().enumerate() {
-                if v.is_finite() && mask(k) {
-                    s += v * v;
-                    m += 1;
-                }
-            }
-            (s / m.max(1) as f64, m)
-        };
+        let nis = |mask: &dyn Fn(usize) -> bool| mean_square(z, mask);
         let mut push = |test: &str, scope: String, statistic: f64, p: f64| {
-            tests.push(TestResult {
-                test: test.into(),
-                channel: channel.clone(),
-                scope,
-                statistic,
-                p_value: p.max(f64::MIN_POSITIVE),
-                p_adjusted: 1.0,
-            });
+            tests.push(TestResult::unadjusted(test, &channel, scope, statistic, p));
         };
         let (overall, m_all) = nis(&|_| true);
         if m_all == 0 {
@@ -308,27 +318,11 @@ pub fn analyse(problem: &Problem) -> WhereReport {
         let z: Vec<f64> = (0..n)
             .map(|k| (problem.measured[c][k] - problem.nominal.outputs[c][k]) / sigma)
             .collect();
-        let nis = |mask: &dyn Fn(usize) -> bool| -> (f64, usize) {
-            let (mut s, mut m) = (0.0, 0usize);
-            for (k, v) in z.iter().enumerate() {
-                if v.is_finite() && mask(k) {
-                    s += v * v;
-                    m += 1;
-                }
-            }
-            (s / m.max(1) as f64, m)
-        };
+        let nis = |mask: &dyn Fn(usize) -> bool| mean_square(&z, mask);
         let overall_index = tests.len();
         let mut local: Vec<TestResult> = Vec::new();
         let mut push = |test: &str, scope: String, statistic: f64, p: f64| {
-            local.push(TestResult {
-                test: test.into(),
-                channel: channel.clone(),
-                scope,
-                statistic,
-                p_value: p.max(f64::MIN_POSITIVE),
-                p_adjusted: 1.0,
-            })
+            local.push(TestResult::unadjusted(test, &channel, scope, statistic, p));
         };
         let (overall, m_all) = nis(&|_| true);
         push(

@@ -978,8 +978,8 @@ impl<'a> Problem<'a> {
             .collect()
     }
 
-    /// RMS over truth columns (each relative to its own RMS over the data) of the replayed states' error on the held-out samples; `None` without
-    /// truth columns in common.
+    /// RMS over truth columns (each relative to its own RMS over the data) of the replayed
+    /// states' error on the held-out samples; `None` without truth columns in common.
     pub fn truth_error(&self, sim: &Simulation) -> Option<f64> {
         self.states_error(&sim.states)
     }
