@@ -315,16 +315,16 @@ mod tests {
         );
         let f = nalgebra::Matrix2::new(1.0, 0.1, 0.0, 1.0);
         let q = nalgebra::Matrix2::new(0.0, 0.0, 0.0, 1e-7);
-        for k in 0..n {
+        for (k, reading) in measured.iter().enumerate() {
             if k > 0 {
                 x = f * x;
                 p = f * p * f.transpose() + q;
             }
             let s = p[(0, 0)] + 0.0025;
-            let innovation = (measured[k] - x[0]) / s.sqrt();
+            let innovation = (reading - x[0]) / s.sqrt();
             assert!((est.innovations[0][k] - innovation).abs() < 1e-9, "{k}");
             let gain = Vector2::new(p[(0, 0)], p[(1, 0)]) / s;
-            x += gain * (measured[k] - x[0]);
+            x += gain * (reading - x[0]);
             p -= gain * Vector2::new(p[(0, 0)], p[(0, 1)]).transpose();
             assert!((est.states["position"][k] - x[0]).abs() < 1e-9, "{k}");
             assert!((est.states["velocity"][k] - x[1]).abs() < 1e-9, "{k}");
