@@ -173,7 +173,7 @@ fn the_motor_estimators_innovations_are_white_on_nominal_data_and_not_with_frict
         let dir = scratch(name);
         let (out, v) = diagnose(&dir, d);
         let tests = v["estimator"]["tests"].as_array().unwrap();
-        assert!(tests.iter().any(|t| t["test"] == "ljung_box"), "{tests:?}");
+        assert!(tests.iter().any(|t| t["test"] == "persistence"), "{tests:?}");
         let report = std::fs::read_to_string(out.join("report.md")).unwrap();
         assert!(report.contains("The plant's estimator with the user's model"));
         tests

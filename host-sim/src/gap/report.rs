@@ -168,7 +168,7 @@ pub fn markdown(d: &Diagnosis) -> String {
 /// every regime rejected after Holm's correction.
 fn estimator_summary(e: &EstimatorCheck) -> impl Iterator<Item = &TestResult> {
     e.tests.iter().filter(|t| {
-        t.scope == "all" || t.test == "ljung_box" || t.p_adjusted < crate::gap::analysis::ALPHA
+        t.scope == "all" || t.test == "persistence" || t.p_adjusted < crate::gap::analysis::ALPHA
     })
 }
 

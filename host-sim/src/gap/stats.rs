@@ -127,6 +127,29 @@ pub fn ljung_box(x: &[f64], h: usize) -> (f64, f64) {
     (q, chi2_sf(q, h as f64))
 }
 
+/// One-sided test that `x` lingers: the sum of its autocorrelations at lags `1..=h`
+/// (its low-frequency power against white noise's), standardised by its white-noise mean
+/// and spread (Bartlett: `E rho_k = -(n - k) / (n (n - 1))`, `var rho_k = (n - k) / (n (n +
+/// 2))`, nearly uncorrelated), and its upper-tail normal p-value. A filter whose model
+/// misses slow dynamics lags behind them and its innovations keep their sign (positive
+/// sum); one that trusts its model less than the data warrant over-corrects, and its
+/// innovations alternate (negative sum), which is no gap.
+pub fn persistence(x: &[f64], h: usize) -> (f64, f64) {
+    let n = x.len() as f64;
+    let rho = autocorrelation(x, h);
+    let (mut mean, mut var) = (0.0, 0.0);
+    for k in 1..=rho.len() {
+        let kept = (n - k as f64).max(0.0);
+        mean -= kept / (n * (n - 1.0)).max(1.0);
+        var += kept / (n * (n + 2.0)).max(1.0);
+    }
+    if var <= 0.0 {
+        return (0.0, 1.0);
+    }
+    let z = (rho.iter().sum::<f64>() - mean) / var.sqrt();
+    (z, normal_sf(z))
+}
+
 /// Median of a copy of `values` (finite ones); `None` when there are none.
 pub fn median(values: &[f64]) -> Option<f64> {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
@@ -258,6 +281,40 @@ mod tests {
             ar[k] = 0.3 * ar[k - 1] + white[k];
         }
         assert!(ljung_box(&ar, 20).1 < 1e-10);
+    }
+
+    #[test]
+    fn persistence_flags_a_lingering_signal_not_an_alternating_one() {
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(8);
+        // Under white noise the statistic is standard normal: 400 records of 2000 samples.
+        let z: Vec<f64> = (0..400)
+            .map(|_| {
+                let w: Vec<f64> = (0..2000).map(|_| standard_normal(&mut rng)).collect();
+                persistence(&w, 20).0
+            })
+            .collect();
+        let mean = z.iter().sum::<f64>() / z.len() as f64;
+        let var = z.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (z.len() - 1) as f64;
+        assert!(mean.abs() < 0.15 && (var - 1.0).abs() < 0.2, "{mean} {var}");
+        let white: Vec<f64> = (0..5000).map(|_| standard_normal(&mut rng)).collect();
+        // A slowly decaying AR(1) lingers. A filter's over-correction alternates: a scalar
+        // one as an MA(1) with a negative coefficient, a two-state one with a positive
+        // echo at lag 2 (the scooter's front wheel: -0.57, +0.13, +0.09). Ljung-Box
+        // rejects all three.
+        let mut ar = vec![0.0f64; 5000];
+        let mut alternating = vec![0.0f64; 5000];
+        let mut echo = vec![0.0f64; 5000];
+        for k in 2..5000 {
+            ar[k] = 0.5 * ar[k - 1] + white[k];
+            alternating[k] = white[k] - 0.3 * white[k - 1];
+            echo[k] = white[k] - 0.8 * white[k - 1] + 0.3 * white[k - 2];
+        }
+        assert!(persistence(&ar, 20).1 < 1e-10);
+        assert!(persistence(&alternating, 20).1 > 0.99);
+        assert!(persistence(&echo, 20).1 > 0.99);
+        assert!(ljung_box(&alternating, 20).1 < 1e-10);
+        assert!(ljung_box(&echo, 20).1 < 1e-10);
+        assert!(ljung_box(&alternating, 20).1 < 1e-10);
     }
 
     #[test]
