@@ -482,10 +482,10 @@ impl<'a> Problem<'a> {
     }
 
     /// The replay from the measured initial condition, then the generic components, with
-    /// the initial condition refitted on the training samples (one Gauss-Newton step on the
-    /// linear sensitivity): the first measurement carries noise and, under a sensor effect
-    /// (bias, scale, saturation, ...), the effect itself, which a slow plant would carry
-    /// through the whole record.
+    /// the initial condition refitted on the training samples (Gauss-Newton on the linear
+    /// sensitivity, see [`refit_start`]): the first measurement carries noise and, under a
+    /// sensor effect (bias, scale, saturation, ...), the effect itself, which a slow plant
+    /// would carry through the whole record.
     /// A quantiser is applied after the refit: through its staircase one Gauss-Newton step
     /// lands anywhere, and its rounding averages out of the fit without it.
     fn with_refitted_start(&self, raw: Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
