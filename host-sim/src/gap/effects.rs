@@ -1341,28 +1341,46 @@ fn grid_then_golden(
 /// The step of the lattice a quantised channel's values lie on: the smallest nonzero
 /// difference between consecutive samples, accepted when at least 90 % of the nonzero
 /// differences are integer multiples of it (to 1e-6) and it is not a float rounding step.
+/// A coarse quantiser may change level too seldom for that (16 changes in 6000 samples of
+/// a wheel current read on three levels): then the gaps between the distinct values, when
+/// each value repeats at least 20 times on average (noisy continuous readings never
+/// repeat exactly).
 pub fn lattice_step(y: &[f64]) -> Option<f64> {
     let scale = y
         .iter()
         .filter(|v| v.is_finite())
         .fold(0.0f64, |m, v| m.max(v.abs()));
+    let rounding = 1e-9 * scale.max(1e-300);
     let diffs: Vec<f64> = y
         .windows(2)
         .map(|w| (w[1] - w[0]).abs())
-        .filter(|d| d.is_finite() && *d > 1e-9 * scale.max(1e-300))
+        .filter(|d| d.is_finite() && *d > rounding)
         .collect();
     if diffs.len() < 20 {
-        return None;
+        let mut levels: Vec<f64> = y.iter().copied().filter(|v| v.is_finite()).collect();
+        let n = levels.len();
+        levels.sort_by(f64::total_cmp);
+        levels.dedup_by(|a, b| (*a - *b).abs() <= rounding);
+        if levels.len() < 2 || n < 20 * levels.len() {
+            return None;
+        }
+        let gaps: Vec<f64> = levels.windows(2).map(|w| w[1] - w[0]).collect();
+        return on_lattice(&gaps, 1.0);
     }
+    on_lattice(&diffs, 0.9)
+}
+
+/// The smallest of `diffs` when at least `share` of them are integer multiples of it.
+fn on_lattice(diffs: &[f64], share: f64) -> Option<f64> {
     let q = diffs.iter().copied().fold(f64::INFINITY, f64::min);
-    let on_lattice = diffs
+    let on = diffs
         .iter()
         .filter(|d| {
             let r = *d / q;
             (r - r.round()).abs() < 1e-6 * r.max(1.0)
         })
         .count();
-    (on_lattice as f64 >= 0.9 * diffs.len() as f64).then_some(q)
+    (q.is_finite() && q > 0.0 && on as f64 >= share * diffs.len() as f64).then_some(q)
 }
 
 /// Batches of consecutive held-out samples for [`separation`]: each spans a twentieth of
@@ -1625,6 +1643,24 @@ mod tests {
         // Equal candidates are not separated; the worse one has z <= 0.
         assert_eq!(separation(&b, &b), 0.0);
         assert!(separation(&b, &a) <= 0.0);
+    }
+
+    #[test]
+    fn a_lattice_is_found_from_its_level_changes_or_its_few_levels() {
+        let q = 0.843_666_581_772_868_6;
+        // Many level changes: the smallest change.
+        let busy: Vec<f64> = (0..400).map(|k| q * (k % 5) as f64 + 0.1).collect();
+        assert!((lattice_step(&busy).unwrap() - q).abs() < 1e-12);
+        // A current read on three levels, changing 16 times in 6000 samples.
+        let coarse: Vec<f64> = (0..6000)
+            .map(|k| q * (((k / 375) % 3) as f64 - 1.0))
+            .collect();
+        assert!((lattice_step(&coarse).unwrap() - q).abs() < 1e-12);
+        // Held values off a lattice (levels 0, 1, 2.5), and noisy readings, are none.
+        let off: Vec<f64> = (0..6000).map(|k| [0.0, 1.0, 2.5][(k / 375) % 3]).collect();
+        assert_eq!(lattice_step(&off), None);
+        let noisy: Vec<f64> = (0..6000).map(|k| (0.37 * k as f64).sin()).collect();
+        assert_eq!(lattice_step(&noisy), None);
     }
 
     #[test]
