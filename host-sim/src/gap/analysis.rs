@@ -280,8 +280,8 @@ pub fn innovation_tests(problem: &Problem, innovations: &[Vec<f64>]) -> Estimato
         let finite: Vec<f64> = z.iter().copied().filter(|v| v.is_finite()).collect();
         // Persistence, not Ljung-Box: every filter here trusts its model less than
         // noise-free simulated truth warrants (its process noise is a margin), so it
-        // over-corrects and its innovations alternate (Ljung-Box Q 120-150 on every
-        // nominal wheel record, lag-1 autocorrelation -0.3 to -0.57 on the scooter's); a
+        // over-corrects and its innovations alternate (Ljung-Box Q 135 and 156 on two
+        // nominal wheel records, lag-1 autocorrelation -0.3 to -0.57 on the scooter's); a
         // slow effect the filter lags behind makes them linger instead. An oscillating
         // one is left to `nis`.
         let (z, p) = persistence(&finite, 20);
