@@ -151,13 +151,24 @@ pub fn refit_start(
         let Some((trial, moved, cost)) = moved_to else {
             break;
         };
-        // A step that no longer lowers the misfit by a noise-level amount has converged
-        // (a linear `observe` gets there in one).
+        // Where the moved start lands where the linearisation said, `observe` is linear
+        // there and the step is exact: no second Jacobian (this runs in every candidate
+        // replay). Likewise a step that no longer lowers the misfit by a noise-level amount.
+        let exact = step == 1.0
+            && moved.iter().enumerate().all(|(j, out)| {
+                out.iter().enumerate().all(|(k, v)| {
+                    let linear = best[j][k]
+                        + (0..m)
+                            .map(|i| delta[i] * (jac[i][j][k] - best[j][k]) / sens[i].step)
+                            .sum::<f64>();
+                    !v.is_finite() || (v - linear).abs() <= 1e-9 * (1.0 + v.abs())
+                })
+            });
         let gain = best_misfit - cost;
         deltas = trial;
         best = moved;
         best_misfit = cost;
-        if gain < 1e-3 {
+        if exact || gain < 1e-3 {
             break;
         }
     }
