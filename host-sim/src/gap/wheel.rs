@@ -549,7 +549,11 @@ impl Wheel {
             poles: p.poles,
             inertia: p.inertia,
         };
-        let (change, swing) = ripple_step(&torques, angle, angle_end, mean_speed, dt);
+        // The torques act along the measured angle's path: near standstill the replayed
+        // speed is relatively far off, and the integral at it, between measured ends,
+        // would be inconsistent with them (many times too large at a zero crossing).
+        let travelled = (angle_end - angle) / dt;
+        let (change, swing) = ripple_step(&torques, angle, angle_end, travelled, dt);
         let next = WheelState {
             current,
             speed: speed + change,
