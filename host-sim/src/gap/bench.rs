@@ -30,6 +30,7 @@ use crate::output::{format_table, write_json, write_text};
 use crate::plants::reaction_wheel::{TruthWheel, WheelEffects, WheelSensors};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// What a dataset contains.
@@ -63,6 +64,10 @@ pub struct Label {
     /// Effect-to-noise ratio (per effect for pairs); NaN when the label gives none.
     #[serde(default = "unrated")]
     pub ratio: f64,
+    /// The truth's magnitude of each effect, in the unit the diagnoser fits it (written
+    /// for the reader comparing fitted values; the bench does not read it).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub truth: BTreeMap<String, f64>,
 }
 
 fn unrated() -> f64 {
@@ -77,6 +82,7 @@ impl Label {
             effects: Vec::new(),
             channel: None,
             ratio: f64::NAN,
+            truth: BTreeMap::new(),
         }
     }
 
@@ -1305,7 +1311,17 @@ fn place(bp: &dyn BenchPlant, seed: u64, base: &Clean, part: &Part, target: f64)
     }
 }
 
-fn dataset(bp: &dyn BenchPlant, name: String, seed: u64, spec: &Spec, label: Label) -> Dataset {
+fn dataset(bp: &dyn BenchPlant, name: String, seed: u64, spec: &Spec, mut label: Label) -> Dataset {
+    label.truth = spec
+        .plant_effects
+        .iter()
+        .map(|(n, m)| (n.clone(), *m))
+        .chain(
+            spec.generic
+                .iter()
+                .map(|(k, ch, m)| (part_name(bp, &Part::Generic(*k, *ch)), *m)),
+        )
+        .collect();
     let effects: Vec<(&str, f64)> = spec
         .plant_effects
         .iter()
@@ -1416,6 +1432,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
                     effects: vec![part_name(bp, p)],
                     channel: Some(format!("y:{}", bp.outputs()[ch])),
                     ratio: *ratio,
+                    truth: BTreeMap::new(),
                 };
                 Some(dataset(bp, name.clone(), *seed, &spec, label))
             })
@@ -1429,6 +1446,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
             effects: vec![],
             channel: None,
             ratio: 0.0,
+            truth: BTreeMap::new(),
         };
         out.push(dataset(
             bp,
@@ -1482,6 +1500,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
                 channel: Some(format!("y:{}", bp.outputs()[ch])),
                 effects: names.clone(),
                 ratio,
+                truth: BTreeMap::new(),
             };
             Some(dataset(
                 bp,
@@ -1515,6 +1534,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
                 effects: vec![name.to_string()],
                 channel: Some(format!("y:{}", bp.outputs()[ch])),
                 ratio,
+                truth: BTreeMap::new(),
             };
             Some(dataset(
                 bp,
