@@ -230,9 +230,9 @@ impl TruthWheel {
         let angle_end = self.angle + mean_speed * dt;
         let ripple = RippleTorques {
             ripple: if self.effects.torque_ripple {
-                p.torque_constant * 0.5 * (i0 + current) * p.torque_ripple
+                [i0, current].map(|i| p.torque_constant * i * p.torque_ripple)
             } else {
-                0.0
+                [0.0; 2]
             },
             cogging: if self.effects.cogging { p.cogging } else { 0.0 },
             poles: p.poles,
@@ -252,8 +252,9 @@ impl TruthWheel {
 /// over one step, and what they act on.
 #[derive(Clone, Copy, Debug)]
 pub struct RippleTorques {
-    /// Ripple amplitude (N m): K_t I B.
-    pub ripple: f64,
+    /// Ripple amplitude (N m), K_t I B, at the step's start and end (the current moves
+    /// within a step behind a driver lag or after a command step).
+    pub ripple: [f64; 2],
     /// Cogging amplitude C (N m).
     pub cogging: f64,
     /// Motor poles N.
@@ -263,9 +264,12 @@ pub struct RippleTorques {
 }
 
 /// The speed change of one step from `angle` to `angle_end` at the wheel's smooth mean
-/// speed `mean_speed` (the exact integral of `sin(k theta)` at that speed), and the swing
-/// those torques leave in the speed at `angle_end`: `-T / (J k w) cos(k theta)` for each
-/// torque whose swing is under a tenth of the speed, else 0.
+/// speed `mean_speed`, and the swing those torques leave in the speed at `angle_end`:
+/// `-T / (J k w) cos(k theta)` for each torque whose swing is under a tenth of the speed,
+/// else 0. The change is the integral of `T(t) sin(k theta)` to first order in
+/// `1 / (k w)`: `(T0 cos(k theta0) - T1 cos(k theta1)) / (J k w)` with the torque at each
+/// end (exact for a constant torque; a torque that moves within the step, integrated at its
+/// mean, would leave a lasting speed offset of `(T0 - T1) / (J k w)` at a command step).
 ///
 /// The mean speed must leave the previous swing out: a mean that holds it correlates
 /// `1 / w` with `cos(k theta)`, and a ripple that averages to nothing would drive the
@@ -280,19 +284,19 @@ pub fn ripple_step(
 ) -> (f64, f64) {
     let mut change = 0.0;
     let mut swing = 0.0;
-    for (torque, k) in [
+    for ([start, torque], k) in [
         (torques.ripple, 3.0 * torques.poles),
-        (torques.cogging, 0.5 * torques.poles),
+        ([torques.cogging; 2], 0.5 * torques.poles),
     ] {
-        if torque == 0.0 {
+        if start == 0.0 && torque == 0.0 {
             continue;
         }
         let turned = k * mean_speed * dt;
         if turned.abs() > 1e-6 {
-            change += torque * ((k * angle).cos() - (k * angle_end).cos())
+            change += (start * (k * angle).cos() - torque * (k * angle_end).cos())
                 / (k * mean_speed * torques.inertia);
         } else {
-            change += torque * (k * angle).sin() * dt / torques.inertia;
+            change += 0.5 * (start + torque) * (k * angle).sin() * dt / torques.inertia;
         }
         // The swing's amplitude against the speed: near standstill the first-order swing
         // no longer describes the motion and the step integrates it as it comes.
