@@ -759,12 +759,27 @@ fn a_single_that_mimics_a_load_step_on_average_is_not_the_verdict() {
 #[test]
 fn gap_finds_torque_ripple_while_the_model_speed_is_off() {
     // The set of the session-9 wm1 bench: the ripple's phase came from the replayed speed,
-    // so its fit shrank the gap by 0.64 only and the verdict was `unknown`.
+    // so its fit shrank the gap by 0.64 only and the verdict was `unknown`. Since the truth
+    // integrates the ripple torque at both ends of a step, this ripple shows mostly near
+    // the zero crossings, which fall in training blocks: the held-out gap before is below
+    // the gap resolution, so its shrink (about 0.5) says little. What a drifting phase
+    // would spoil is the fitted amplitude and noise in every held-out block.
+    let dir = scratch("ripple-speed-off");
     let d = &named(
         generated("reaction_wheel", &[], &[2.0, 4.0], 2026, 0),
         "reaction_wheel-torque_ripple-r4-s0",
     );
-    assert_found(d, "torque_ripple", 0.9);
+    let (_, v) = diagnose(&dir, d);
+    assert_eq!(v["verdict"], "torque_ripple", "{}", v["ranking"][0]);
+    let top = &v["ranking"][0];
+    let fitted = top["params"][0][1].as_f64().unwrap();
+    let truth = d.label.truth["torque_ripple"];
+    assert!(
+        (fitted / truth - 1.0).abs() < 0.03,
+        "fitted {fitted}, truth {truth}"
+    );
+    assert!(top["worst_block_p"].as_f64().unwrap() > 0.05, "{top}");
+    assert!(top["gap_after"].as_f64().unwrap() < top["gap_before"].as_f64().unwrap());
 }
 
 #[test]
