@@ -461,37 +461,53 @@ fn gap_bench_on_a_folder_goes_past_unlabelled_and_bad_datasets() {
     assert!(dir.join("bench.json").exists());
 }
 
-#[test]
-fn a_ripple_is_found_without_the_measured_angle() {
-    // Without `u:angle` the ripple, 8.6 kHz at 500 rad/s against 20 Hz samples, has no
-    // phase to replay; as a speed spread growing with current over speed it is still the
-    // best explanation (before: `unknown`, the replay's lost phase only adding error).
-    // Not always: on the seed-2026 folder 3 of 4 ratio-4 sets, see docs/results.md.
-    let d = generated("reaction_wheel", &["torque_ripple"], &[4.0], 2026, 0).remove(0);
-    let header = d.csv.lines().next().unwrap();
-    let angle = header.split(',').position(|c| c == "u:angle").unwrap();
-    let csv: String = d
-        .csv
-        .lines()
+/// `csv` without its column `name`.
+fn without_column(csv: &str, name: &str) -> String {
+    let header = csv.lines().next().unwrap();
+    let column = header.split(',').position(|c| c == name).unwrap();
+    csv.lines()
         .map(|l| {
             let cells: Vec<&str> = l
                 .split(',')
                 .enumerate()
-                .filter(|(i, _)| *i != angle)
+                .filter(|(i, _)| *i != column)
                 .map(|(_, c)| c)
                 .collect();
             format!("{}\n", cells.join(","))
         })
-        .collect();
-    let o = run_one(&Dataset { csv, ..d }).unwrap();
-    assert_eq!(o.verdict, "torque_ripple", "top 3: {:?}", o.top3);
-    assert_eq!(o.channel, "y:speed");
+        .collect()
+}
+
+#[test]
+fn a_ripple_is_found_without_the_measured_angle() {
+    // Without `u:angle` the ripple, 8.6 kHz at 500 rad/s against 20 Hz samples, has no
+    // phase to replay: it is a speed spread growing with current over speed, and each
+    // command step kicks the mean speed by the swing's change at an unknown angle, a
+    // random offset tracked on the measured speed. Before the kicks were tracked both
+    // sets were `unknown` (B = 25.8 and 145; now fitted 26.7 and 145.5). A ripple of B
+    // near 0.1, felt only through zero speed where the spread is a poor model, is still
+    // missed (docs/results.md, session 22).
+    for d in generated("reaction_wheel", &["torque_ripple"], &[2.0, 8.0], 7, 0) {
+        let truth = d.label.truth["torque_ripple"];
+        let csv = without_column(&d.csv, "u:angle");
+        let d = Dataset { csv, ..d };
+        let dir = scratch(&format!("ripple-no-angle-{}", d.name));
+        let (_, verdict) = diagnose(&dir, &d);
+        assert_eq!(verdict["verdict"], "torque_ripple", "{}", d.name);
+        assert_eq!(verdict["where"]["channel"], "y:speed", "{}", d.name);
+        let fitted = verdict["ranking"][0]["params"][0][1].as_f64().unwrap();
+        assert!(
+            (fitted / truth - 1.0).abs() < 0.1,
+            "{}: fitted {fitted}, truth {truth}",
+            d.name
+        );
+    }
 }
 
 #[test]
 fn a_drifting_speed_sensor_is_unknown_not_a_bias() {
     // A linear drift of the speed reading (outside the catalogue), RMS 4 times the noise,
-    // on the seed-77 bench's `none` wheel. A speed bias removed 80.5 % of it held out but
+    // on the seed-77 bench's `none` wheel, with and without `u:angle`. A speed bias removed 80.5 % of it held out but
     // left a block at p 2e-24; it was the verdict, a single that removed over 80 % being
     // exempt from the block test.
     let d = generated("reaction_wheel", &["coulomb_friction"], &[4.0], 77, 1)
@@ -522,8 +538,13 @@ fn a_drifting_speed_sensor_is_unknown_not_a_bias() {
             format!("{}\n", cells.join(","))
         }))
         .collect();
-    let o = run_one(&Dataset { csv, ..d }).unwrap();
+    let no_angle = without_column(&csv, "u:angle");
+    let o = run_one(&Dataset { csv, ..d.clone() }).unwrap();
     assert_eq!(o.verdict, "unknown", "top 3: {:?}", o.top3);
+    // Without the angle a ripple's kicks, tracked on the measured speed, follow the drift
+    // at each command step; between steps they lag it, which the window means show.
+    let o = run_one(&Dataset { csv: no_angle, ..d }).unwrap();
+    assert_eq!(o.verdict, "unknown", "without u:angle, top 3: {:?}", o.top3);
 }
 
 #[test]

@@ -192,6 +192,7 @@ pub fn simulate_motor(
         outputs: vec![out_i, out_w],
         states,
         variances: Vec::new(),
+        innovations: false,
     })
 }
 

@@ -935,6 +935,7 @@ fn select_outputs(sim: &Simulation, select: &[usize]) -> Simulation {
             .iter()
             .map(|&i| sim.variances.get(i).cloned().flatten())
             .collect(),
+        innovations: sim.innovations,
     }
 }
 
@@ -1010,6 +1011,7 @@ impl GapPlant for SelectPlant<'_> {
             outputs: vec![vec![0.0; data.len()]; all.len()],
             states: nominal.states.clone(),
             variances: Vec::new(),
+            innovations: nominal.innovations,
         };
         for (j, &i) in self.select.iter().enumerate() {
             full.outputs[i] = nominal.outputs[j].clone();
@@ -1075,6 +1077,15 @@ pub fn decide(
         .filter_map(|c| problem.fit(std::slice::from_ref(c), None))
         .collect();
     evaluated.sort_by(|a, b| b.score.total_cmp(&a.score));
+    // The ranking stays by score; the decision below reads `evaluated`.
+    let ranking = evaluated.clone();
+    // A replay that tracks the readings (innovations: a wheel ripple's kicks without the
+    // measured angle) follows any slow misfit that changes at command steps, and its
+    // held-out gap is that of one-step predictions. Unless it leaves noise in every
+    // held-out block it explains nothing: the decision takes it after every candidate
+    // that replays.
+    let mimic = |e: &Evaluation| e.innovations && e.worst_block_p < ALPHA;
+    evaluated.sort_by_key(|e| mimic(e));
     let resolution = problem.gap_resolution();
     // What a candidate leaves below the resolution is noise, whatever fraction it removed
     // (a gap just above the resolution cannot shrink by much in relative terms).
@@ -1082,7 +1093,7 @@ pub fn decide(
         e.score >= MIN_SCORE && (e.shrink >= EXPLAIN_SHRINK || e.gap_after < resolution)
     };
     let Some(best) = evaluated.first().cloned() else {
-        return ("unknown".into(), evaluated, Vec::new());
+        return ("unknown".into(), ranking, Vec::new());
     };
     if !report.location.significant {
         // No test sees more than noise: a candidate may still explain a small gap the tests
@@ -1092,7 +1103,7 @@ pub fn decide(
         } else {
             "none".into()
         };
-        return (verdict, evaluated, Vec::new());
+        return (verdict, ranking, Vec::new());
     }
     // Whatever explains the gap must also leave noise in every held-out block: a slow
     // effect, or two, can mimic a load step midway on average, not block by block, and a
@@ -1103,7 +1114,7 @@ pub fn decide(
     if explains(&best)
         && (best.gap_after < resolution || best.shrink >= PAIR_TRIGGER && everywhere(&best))
     {
-        return (best.effect.clone(), evaluated, Vec::new());
+        return (best.effect.clone(), ranking, Vec::new());
     }
     // From here on the best single leaves over a fifth of the gap or some block unexplained.
     // Forward step: every other candidate added to the best single effect; and every pair
@@ -1169,12 +1180,12 @@ pub fn decide(
         && pair.score >= best.score + MIN_SCORE
         && pair.shrink >= best.shrink + 0.1
     {
-        return (pair.effect.clone(), evaluated, fitted_pairs);
+        return (pair.effect.clone(), ranking, fitted_pairs);
     }
     if explains(&best) && everywhere(&best) {
-        return (best.effect, evaluated, fitted_pairs);
+        return (best.effect, ranking, fitted_pairs);
     }
-    ("unknown".into(), evaluated, fitted_pairs)
+    ("unknown".into(), ranking, fitted_pairs)
 }
 
 fn overlays(problem: &Problem, report: &WhereReport, chosen: Option<&Evaluation>) -> Vec<Overlay> {

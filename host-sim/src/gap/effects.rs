@@ -13,7 +13,7 @@
 use crate::gap::estimate::{ChannelSensor, Estimates, Sensors};
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use crate::gap::start::{StartSensitivity, refit_start, start_sensitivities};
-use crate::gap::stats::{holm, variance_ratio_p};
+use crate::gap::stats::{chi2_sf, holm, variance_ratio_p};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
 use serde::Serialize;
@@ -22,6 +22,40 @@ use std::collections::BTreeMap;
 /// A fitted quantiser on one channel: its `(step, offset)` and its input, the candidate's
 /// replay of that channel without the quantiser.
 pub type QuantiserReplay = ((f64, f64), Vec<f64>);
+
+/// Samples per window of [`innovation_means_p`]: 5 s at the wheel's 20 Hz, long against
+/// the ripple's swing (far above the sample rate, aliased anywhere) and short against the
+/// seconds between command steps.
+const INNOVATION_WINDOW: usize = 100;
+
+/// p-value that innovations (`measured - predicted`, variance `variance(k)`) have no mean
+/// over windows of [`INNOVATION_WINDOW`] samples: the sum of the squared standardised
+/// window sums against chi-square. A replay that tracks its readings through random kicks
+/// follows a slow misfit (a sensor drift, a load step) only after each kick and lags it in
+/// between, where its innovations keep their sign; per sample that lag hides in the noise.
+fn innovation_means_p(measured: &[f64], predicted: &[f64], variance: impl Fn(usize) -> f64) -> f64 {
+    let (mut statistic, mut windows) = (0.0, 0usize);
+    for start in (0..measured.len()).step_by(INNOVATION_WINDOW) {
+        let end = (start + INNOVATION_WINDOW).min(measured.len());
+        let (mut sum, mut n) = (0.0, 0usize);
+        for k in start..end {
+            let z = (measured[k] - predicted[k]) / variance(k).sqrt();
+            if z.is_finite() {
+                sum += z;
+                n += 1;
+            }
+        }
+        // A short tail window says little and would count as a whole one.
+        if n >= INNOVATION_WINDOW / 2 {
+            statistic += sum * sum / n as f64;
+            windows += 1;
+        }
+    }
+    if windows == 0 {
+        return 1.0;
+    }
+    chi2_sf(statistic, windows as f64)
+}
 
 /// The spread a replay adds to channel `c`'s readings, if any ([`Simulation::variances`]).
 fn added_variance(sim: &Simulation, c: usize) -> Option<&Vec<f64>> {
@@ -346,6 +380,9 @@ pub struct Evaluation {
     /// Holm-adjusted p-value of the held-out block (and channel) whose residual variance
     /// exceeds the noise the most (see [`Problem::worst_block_p`]).
     pub worst_block_p: f64,
+    /// The replay's outputs are innovations ([`Simulation::innovations`]).
+    #[serde(skip)]
+    pub innovations: bool,
     /// Training cost at the fit (sum of squared standardised residuals).
     #[serde(skip)]
     pub train_cost: f64,
@@ -505,6 +542,7 @@ impl<'a> Problem<'a> {
             outputs: self.apply_generic(outputs, &quantisers),
             states: raw.states,
             variances: raw.variances,
+            innovations: raw.innovations,
         }
     }
 
@@ -783,6 +821,11 @@ impl<'a> Problem<'a> {
                         n as f64,
                         self.sigma_dof[c],
                     ));
+                }
+                if let Some(spread) = added.filter(|_| sim.innovations) {
+                    p.push(innovation_means_p(&y[a..b], &m[a..b], |k| {
+                        s2 + spread[a + k]
+                    }));
                 }
             }
         }
@@ -1148,6 +1191,7 @@ impl<'a> Problem<'a> {
             estimation_error_before: None,
             estimation_error_after: None,
             worst_block_p: self.worst_block_p(&sim, &quantisers),
+            innovations: sim.innovations,
             train_cost: best,
             absolute_score: absolute,
             batch_ll: self.held_out_batches(&sim, &predicted),
@@ -1633,6 +1677,7 @@ mod tests {
             estimation_error_before: None,
             estimation_error_after: None,
             worst_block_p: 1.0,
+            innovations: false,
             train_cost: 0.0,
             absolute_score: score,
             batch_ll: batches,

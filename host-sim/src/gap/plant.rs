@@ -297,6 +297,10 @@ pub struct Simulation {
     /// sensor noise, where it predicts a spread rather than a value (a torque ripple whose
     /// phase is unknown); empty or `None` where it predicts values only.
     pub variances: Vec<Option<Vec<f64>>>,
+    /// The outputs are one-step predictions that took in the readings before each sample
+    /// (a wheel ripple's kicks tracked on the measured speed): their held-out misfit is
+    /// that of innovations, and says less of how much the replay explains.
+    pub innovations: bool,
 }
 
 /// A labelled operating regime: the sample indices that belong to it.

@@ -317,6 +317,7 @@ pub fn simulate_scooter(
         outputs: out,
         states: named,
         variances: Vec::new(),
+        innovations: false,
     })
 }
 

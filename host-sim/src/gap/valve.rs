@@ -321,6 +321,7 @@ pub fn simulate_valve(
         outputs: out,
         states,
         variances: Vec::new(),
+        innovations: false,
     })
 }
 

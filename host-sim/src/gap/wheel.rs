@@ -300,6 +300,49 @@ fn unknown_phase_variance(
     variance
 }
 
+/// The mean speed's offset from the kicks of a ripple of unknown phase
+/// ([`UnknownPhase::kick`]), tracked by a scalar Kalman filter on the measured speed: each
+/// kick is a random step of the offset, which decays with the wheel's `J / c_v`. The
+/// replayed speed becomes the one-step prediction (replay plus predicted offset) and its
+/// spread grows by the offset's predicted variance, so the held-out likelihood scores the
+/// innovations. Without kicks (cogging, a driver lag) nothing changes. Returns whether it
+/// tracked.
+fn track_kicks(
+    w: &Wheel,
+    data: &PlantData,
+    measured: &[f64],
+    unknown_phase: &[UnknownPhase],
+    speed: &mut [f64],
+    spread: &mut [f64],
+) -> bool {
+    if unknown_phase.iter().all(|u| u.kick <= 0.0) {
+        return false;
+    }
+    // The readings' noise estimate holds the spread's average: the sensor's own is the rest.
+    let Some((sigma, _)) = crate::gap::stats::noise_std_from_differences(measured) else {
+        return false;
+    };
+    let mean_spread = spread.iter().sum::<f64>() / spread.len().max(1) as f64;
+    let sensor = (sigma * sigma - mean_spread).max(0.1 * sigma * sigma);
+    let decay = (-w.viscous / w.p.inertia * data.dt.max(0.0)).exp();
+    let (mut offset, mut variance) = (0.0, 0.0);
+    for k in 0..speed.len().min(measured.len()) {
+        let kick = unknown_phase.get(k).map_or(0.0, |u| u.kick);
+        offset *= decay;
+        variance = decay * decay * variance + kick;
+        speed[k] += offset;
+        let reading = sensor + spread[k];
+        spread[k] += variance;
+        let innovation = measured[k] - speed[k];
+        if innovation.is_finite() && variance > 0.0 {
+            let gain = variance / (variance + reading);
+            offset += gain * innovation;
+            variance *= 1.0 - gain;
+        }
+    }
+    true
+}
+
 #[derive(Clone, Copy)]
 struct Wheel {
     p: WheelParams<f64>,
@@ -415,14 +458,27 @@ impl<'a> Record<'a> {
     }
 }
 
-/// The wheel between samples: current, speed (with the ripple's swing), rotor angle, and
-/// the swing the ripple adds to the speed around its mean.
+/// The wheel between samples: current, speed (with the ripple's swing), rotor angle, the
+/// swing the ripple adds to the speed around its mean, and the current at the end of the
+/// last step (before a new command moves it).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct WheelState {
     current: f64,
     speed: f64,
     angle: f64,
     swing: f64,
+    end_current: f64,
+}
+
+/// What a ripple or cogging of unknown phase adds to a step ([`Record::spread`]): the
+/// variance of the speed sampled at its end, and the variance of the lasting kick a jump
+/// of the ripple torque at its start gives the mean speed. The speed is continuous, so
+/// when the torque jumps at an unknown angle the mean takes up the change of the swing:
+/// `dT cos(k theta) / (J k w)`, a random offset that then decays with the wheel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct UnknownPhase {
+    reading: f64,
+    kick: f64,
 }
 
 impl Wheel {
@@ -430,15 +486,17 @@ impl Wheel {
     /// driver lags), the measured angle.
     fn initial_state(&self, rec: &Record, data: &PlantData) -> WheelState {
         let algebraic = self.p.drive_gain * rec.command.first().copied().unwrap_or(0.0);
+        let current = if self.on.lowpass {
+            data.first_output("current").unwrap_or(algebraic)
+        } else {
+            algebraic
+        };
         WheelState {
-            current: if self.on.lowpass {
-                data.first_output("current").unwrap_or(algebraic)
-            } else {
-                algebraic
-            },
+            current,
             speed: data.first_output("speed").unwrap_or(0.0),
             angle: rec.angle.and_then(|a| a.first().copied()).unwrap_or(0.0),
             swing: 0.0,
+            end_current: current,
         }
     }
 
@@ -454,9 +512,9 @@ impl Wheel {
         }
     }
 
-    /// From sample `k` to `k + 1`; with the ripple's phase unknown, also the variance it
-    /// adds to the speed sampled at `k + 1` (0 otherwise).
-    fn advance(&self, rec: &Record, k: usize, s: WheelState) -> (WheelState, f64) {
+    /// From sample `k` to `k + 1`; with the ripple's phase unknown, also what it adds to
+    /// the speed ([`UnknownPhase`], zero otherwise).
+    fn advance(&self, rec: &Record, k: usize, s: WheelState) -> (WheelState, UnknownPhase) {
         let p = &self.p;
         let on = self.on;
         let v = rec.command[k];
@@ -507,22 +565,33 @@ impl Wheel {
         // The ripple's swing left out, as the truth wheel does (`ripple_step`).
         let mean_speed = 0.5 * (w0 + speed) - s.swing;
         if rec.spread {
-            let variance = unknown_phase_variance(
-                *p,
-                on.ripple,
-                on.cogging,
-                0.5 * (i0 + current),
-                mean_speed,
-                dt,
-            );
+            let spread = UnknownPhase {
+                reading: unknown_phase_variance(
+                    *p,
+                    on.ripple,
+                    on.cogging,
+                    0.5 * (i0 + current),
+                    mean_speed,
+                    dt,
+                ),
+                kick: unknown_phase_variance(
+                    *p,
+                    on.ripple,
+                    false,
+                    i0 - s.end_current,
+                    mean_speed,
+                    dt,
+                ),
+            };
             angle += mean_speed * dt;
             let next = WheelState {
                 current,
                 speed,
                 angle,
                 swing: s.swing,
+                end_current: current,
             };
-            return (next, variance);
+            return (next, spread);
         }
         // The measured angle pins the phase at the step's end too: otherwise a replayed
         // speed error dw puts the ripple 3 N dw dt off (5 rad for 1 rad/s at 20 Hz), and
@@ -559,8 +628,9 @@ impl Wheel {
             speed: speed + change,
             angle: angle_end.rem_euclid(std::f64::consts::TAU),
             swing,
+            end_current: current,
         };
-        (next, 0.0)
+        (next, UnknownPhase::default())
     }
 }
 
@@ -610,6 +680,7 @@ pub fn estimate_wheel(
                 speed: x[SPEED],
                 angle: rec.angle.map_or(0.0, |a| a[k]),
                 swing: x[SWING],
+                end_current: x[CURRENT],
             };
             let (mut next, _) = w.advance(&rec, k, s);
             w.show(&rec, k + 1, &mut next);
@@ -742,7 +813,7 @@ impl GapPlant for WheelGapPlant {
         let mut s = w.initial_state(&rec, data);
         let mut out_i = Vec::with_capacity(n);
         let mut out_w = Vec::with_capacity(n);
-        let mut var_w = vec![0.0; if rec.spread { n } else { 0 }];
+        let mut unknown_phase = vec![UnknownPhase::default(); if rec.spread { n } else { 0 }];
         for k in 0..n {
             w.show(&rec, k, &mut s);
             out_i.push(s.current);
@@ -750,15 +821,22 @@ impl GapPlant for WheelGapPlant {
             if k + 1 == n {
                 break;
             }
-            let variance;
-            (s, variance) = w.advance(&rec, k, s);
-            if let Some(v) = var_w.get_mut(k + 1) {
-                *v = variance;
+            let added;
+            (s, added) = w.advance(&rec, k, s);
+            if let Some(v) = unknown_phase.get_mut(k + 1) {
+                *v = added;
             }
             if !(s.speed.is_finite() && s.current.is_finite()) {
                 return Err(format!("replay diverged at t = {}", data.t[k]));
             }
         }
+        let mut var_w: Vec<f64> = unknown_phase.iter().map(|u| u.reading).collect();
+        let innovations = match data.output("speed").filter(|_| rec.spread) {
+            Some(measured) => {
+                track_kicks(&w, data, measured, &unknown_phase, &mut out_w, &mut var_w)
+            }
+            None => false,
+        };
         let mut states = BTreeMap::new();
         states.insert("current".to_string(), out_i.clone());
         states.insert("speed".to_string(), out_w.clone());
@@ -770,6 +848,7 @@ impl GapPlant for WheelGapPlant {
             } else {
                 Vec::new()
             },
+            innovations,
         })
     }
 
