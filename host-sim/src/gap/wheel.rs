@@ -300,6 +300,10 @@ fn unknown_phase_variance(
     variance
 }
 
+/// The smallest current jump within one sample, relative to the current's range over the
+/// record, that counts as a command step ([`track_kicks`]).
+const KICK_JUMP: f64 = 0.05;
+
 /// The mean speed's offset from the kicks of a ripple of unknown phase
 /// ([`UnknownPhase::kick`]), tracked by a scalar Kalman filter on the measured speed: each
 /// kick is a random step of the offset, which decays with the wheel's `J / c_v`. The
@@ -312,22 +316,46 @@ fn track_kicks(
     data: &PlantData,
     measured: &[f64],
     unknown_phase: &[UnknownPhase],
+    current: &[f64],
     speed: &mut [f64],
     spread: &mut [f64],
 ) -> bool {
-    if unknown_phase.iter().all(|u| u.kick <= 0.0) {
+    // Only a command step kicks: a current that moves a little every sample (a smooth
+    // command held per sample) kicks by as little each time, a random walk far below one
+    // step's kick, and the filter would chase the readings' own swing instead (aliased,
+    // it is slow wherever the speed sweeps past a multiple of the sample rate).
+    let (lo, hi) = current
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    let least_jump = KICK_JUMP * (hi - lo);
+    let kicks: Vec<f64> = unknown_phase
+        .iter()
+        .map(|u| {
+            if u.jump.abs() >= least_jump {
+                u.kick
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    if kicks.iter().all(|&k| k <= 0.0) {
         return false;
     }
-    // The readings' noise estimate holds the spread's average: the sensor's own is the rest.
+    // The readings' noise estimate holds the typical spread: the sensor's own is the rest.
     let Some((sigma, _)) = crate::gap::stats::noise_std_from_differences(measured) else {
         return false;
     };
-    let mean_spread = spread.iter().sum::<f64>() / spread.len().max(1) as f64;
-    let sensor = (sigma * sigma - mean_spread).max(0.1 * sigma * sigma);
+    // Typical, not mean: that estimate leaves out the few samples near standstill, where
+    // the spread is many times its median.
+    let typical = crate::gap::stats::median(spread).unwrap_or(0.0);
+    let sensor = (sigma * sigma - typical).max(0.1 * sigma * sigma);
     let decay = (-w.viscous / w.p.inertia * data.dt.max(0.0)).exp();
     let (mut offset, mut variance) = (0.0, 0.0);
     for k in 0..speed.len().min(measured.len()) {
-        let kick = unknown_phase.get(k).map_or(0.0, |u| u.kick);
+        let kick = kicks.get(k).copied().unwrap_or(0.0);
         offset *= decay;
         variance = decay * decay * variance + kick;
         speed[k] += offset;
@@ -479,6 +507,8 @@ struct WheelState {
 struct UnknownPhase {
     reading: f64,
     kick: f64,
+    /// The current's jump at the step's start that makes the kick.
+    jump: f64,
 }
 
 impl Wheel {
@@ -582,6 +612,7 @@ impl Wheel {
                     mean_speed,
                     dt,
                 ),
+                jump: i0 - s.end_current,
             };
             angle += mean_speed * dt;
             let next = WheelState {
@@ -832,9 +863,15 @@ impl GapPlant for WheelGapPlant {
         }
         let mut var_w: Vec<f64> = unknown_phase.iter().map(|u| u.reading).collect();
         let innovations = match data.output("speed").filter(|_| rec.spread) {
-            Some(measured) => {
-                track_kicks(&w, data, measured, &unknown_phase, &mut out_w, &mut var_w)
-            }
+            Some(measured) => track_kicks(
+                &w,
+                data,
+                measured,
+                &unknown_phase,
+                &out_i,
+                &mut out_w,
+                &mut var_w,
+            ),
             None => false,
         };
         let mut states = BTreeMap::new();
@@ -1073,6 +1110,50 @@ mod tests {
         let without = rms(&["driver_lowpass"]);
         assert!(without > 5e-3, "the ripple must matter: {without}");
         assert!(error < 3e-4, "{error} (without the ripple {without})");
+    }
+
+    #[test]
+    fn without_the_angle_command_steps_kick_the_mean_speed_and_the_replay_tracks_them() {
+        // B = 300, the command stepping every 10 s: each step jumps the ripple torque at an
+        // angle the record does not hold, and the mean speed keeps the swing's change.
+        let n = 4000;
+        let mut data = profile(n);
+        let levels = [3.0, 1.0, 2.5, 0.5, 3.5, 1.5];
+        let command: Vec<f64> = (0..n).map(|k| levels[(k / 200) % levels.len()]).collect();
+        data.inputs.insert("command".into(), command.clone());
+        let mut truth = TruthWheel::new();
+        truth.effects = WheelEffects {
+            torque_ripple: true,
+            ..WheelEffects::none()
+        };
+        truth.params.torque_ripple = 300.0;
+        let [i, w, _] = record(&mut truth, &command);
+        data.outputs.insert("current".into(), i);
+        data.outputs.insert("speed".into(), w.clone());
+        let plant = WheelGapPlant;
+        let mut params = plant.default_params();
+        params.insert("torque_ripple".into(), 300.0);
+        let rms = |sim: &Simulation| {
+            let sum: f64 = (0..n).map(|k| (sim.outputs[1][k] - w[k]).powi(2)).sum();
+            (sum / n as f64).sqrt()
+        };
+        let tracked = plant.simulate(&params, &["torque_ripple"], &data).unwrap();
+        let untracked = plant.simulate(&params, &[], &data).unwrap();
+        assert!(tracked.innovations && !untracked.innovations);
+        let spread = tracked.variances[1].as_ref().unwrap();
+        let typical = crate::gap::stats::median(spread).unwrap().sqrt();
+        let (e_tracked, e_untracked) = (rms(&tracked), rms(&untracked));
+        assert!(
+            e_untracked > 2.0 * typical,
+            "{e_untracked} vs swing {typical}"
+        );
+        // Tracked, what is left is the swing itself (0.0091 against 0.0085 here).
+        assert!(e_tracked < 1.25 * typical, "{e_tracked} vs swing {typical}");
+        // A command that moves a little every sample kicks by as little: nothing to track.
+        let smooth: Vec<f64> = (0..n).map(|k| 2.0 + (0.002 * k as f64).sin()).collect();
+        data.inputs.insert("command".into(), smooth);
+        let sim = plant.simulate(&params, &["torque_ripple"], &data).unwrap();
+        assert!(!sim.innovations);
     }
 
     #[test]
