@@ -484,7 +484,7 @@ fn a_ripple_is_found_without_the_measured_angle() {
     // phase to replay: it is a speed spread growing with current over speed, and each
     // command step kicks the mean speed by the swing's change at an unknown angle, a
     // random offset tracked on the measured speed. Before the kicks were tracked both
-    // sets were `unknown` (B = 25.8 and 145; now fitted 26.7 and 145.5). A ripple of B
+    // sets were `unknown` (B = 25.8 and 145.1; now fitted 26.9 and 145.3). A ripple of B
     // near 0.1, felt only through zero speed where the spread is a poor model, is still
     // missed (docs/results.md, session 22).
     for d in generated("reaction_wheel", &["torque_ripple"], &[2.0, 8.0], 7, 0) {

@@ -801,7 +801,9 @@ impl GapPlant for WheelGapPlant {
             (
                 "angle",
                 "the commutation angle; without it ripple and cogging have no phase \
-                 and are fitted as the spread they add to the sampled speed",
+                 and are fitted as the spread they add to the sampled speed, and the \
+                 offset a ripple leaves in the mean speed at each command step is \
+                 tracked on the measured speed",
             ),
         ]
     }
