@@ -300,6 +300,40 @@ fn unknown_phase_variance(
     variance
 }
 
+/// Variance of the lasting kick that ripple and cogging of unknown phase give the mean
+/// speed when it passes through zero with acceleration `acceleration`. Near standstill the
+/// angle-periodic torque `T sin(k theta)` no longer averages out: with `theta` quadratic in
+/// time through the turning point, its impulse is a Fresnel integral, `T / J sqrt(2 pi /
+/// (k |a|))` times the sine of an unknown phase (variance `pi (T / J)^2 / (k |a|)`). Capped
+/// at the impulse of ten samples of the full torque, for a crossing too slow for that
+/// picture.
+fn crossing_kick(
+    p: WheelParams<f64>,
+    ripple: bool,
+    cogging: bool,
+    current: f64,
+    acceleration: f64,
+    dt: f64,
+) -> f64 {
+    let kick = |torque: f64, k: f64| -> f64 {
+        let impulse = torque / p.inertia;
+        let fresnel = std::f64::consts::PI * impulse * impulse
+            / (k * acceleration.abs()).max(f64::MIN_POSITIVE);
+        fresnel.min(0.5 * (impulse * 10.0 * dt).powi(2))
+    };
+    let mut variance = 0.0;
+    if ripple {
+        variance += kick(
+            (p.torque_constant * current * p.torque_ripple).abs(),
+            3.0 * p.poles,
+        );
+    }
+    if cogging {
+        variance += kick(p.cogging.abs(), 0.5 * p.poles);
+    }
+    variance
+}
+
 /// The smallest current jump within one sample, relative to the current's range over the
 /// record, that counts as a command step ([`track_kicks`]).
 const KICK_JUMP: f64 = 0.05;
@@ -320,7 +354,7 @@ fn track_kicks(
     speed: &mut [f64],
     spread: &mut [f64],
 ) -> bool {
-    // Only a command step kicks: a current that moves a little every sample (a smooth
+    // Only a command step (and a zero crossing) kicks: a current that moves a little every sample (a smooth
     // command held per sample) kicks by as little each time, a random walk far below one
     // step's kick, and the filter would chase the readings' own swing instead (aliased,
     // it is slow wherever the speed sweeps past a multiple of the sample rate).
@@ -334,11 +368,12 @@ fn track_kicks(
     let kicks: Vec<f64> = unknown_phase
         .iter()
         .map(|u| {
-            if u.jump.abs() >= least_jump {
-                u.kick
-            } else {
-                0.0
-            }
+            u.crossing
+                + if u.jump.abs() >= least_jump {
+                    u.kick
+                } else {
+                    0.0
+                }
         })
         .collect();
     if kicks.iter().all(|&k| k <= 0.0) {
@@ -509,6 +544,9 @@ struct UnknownPhase {
     kick: f64,
     /// The current's jump at the step's start that makes the kick.
     jump: f64,
+    /// The variance of the kick a passage through zero speed within the step gives the
+    /// mean speed ([`crossing_kick`]).
+    crossing: f64,
 }
 
 impl Wheel {
@@ -613,6 +651,18 @@ impl Wheel {
                     dt,
                 ),
                 jump: i0 - s.end_current,
+                crossing: if w0 * speed < 0.0 {
+                    crossing_kick(
+                        *p,
+                        on.ripple,
+                        on.cogging,
+                        0.5 * (i0 + current),
+                        (speed - w0) / dt,
+                        dt,
+                    )
+                } else {
+                    0.0
+                },
             };
             angle += mean_speed * dt;
             let next = WheelState {
@@ -1156,6 +1206,39 @@ mod tests {
         data.inputs.insert("command".into(), smooth);
         let sim = plant.simulate(&params, &["torque_ripple"], &data).unwrap();
         assert!(!sim.innovations);
+    }
+
+    #[test]
+    fn a_crossing_kick_has_the_variance_of_the_fresnel_impulse() {
+        // Through zero speed at 2 rad/s^2, theta = theta0 + a t^2 / 2: the impulse of
+        // C sin(k theta) / J over the crossing, integrated finely for 64 phases, against
+        // pi (C / J)^2 / (k a).
+        let mut p = WheelParams::<f64>::ithaco_type_a();
+        p.cogging = 1e-3;
+        let (a, k) = (2.0, 0.5 * p.poles);
+        let (h, span) = (1e-4, 6.0);
+        let phases = 64;
+        let mut sum = 0.0;
+        for j in 0..phases {
+            let theta0 = std::f64::consts::TAU * j as f64 / phases as f64;
+            let steps = (2.0 * span / h) as usize;
+            let impulse: f64 = (0..steps)
+                .map(|i| {
+                    let t = -span + (i as f64 + 0.5) * h;
+                    (k * (theta0 + 0.5 * a * t * t)).sin()
+                })
+                .sum::<f64>()
+                * h
+                * p.cogging
+                / p.inertia;
+            sum += impulse * impulse;
+        }
+        let measured = sum / phases as f64;
+        let predicted = crossing_kick(p, false, true, 0.0, a, 0.05);
+        assert!(
+            (measured / predicted - 1.0).abs() < 0.05,
+            "{measured} vs {predicted}"
+        );
     }
 
     #[test]
