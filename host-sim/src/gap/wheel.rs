@@ -852,8 +852,8 @@ impl GapPlant for WheelGapPlant {
                 "angle",
                 "the commutation angle; without it ripple and cogging have no phase \
                  and are fitted as the spread they add to the sampled speed, and the \
-                 offset a ripple leaves in the mean speed at each command step is \
-                 tracked on the measured speed",
+                 offset they leave in the mean speed (a ripple at each command step, \
+                 both at each zero crossing) is tracked on the measured speed",
             ),
         ]
     }
