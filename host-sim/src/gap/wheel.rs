@@ -282,22 +282,30 @@ fn unknown_phase_variance(
     speed: f64,
     dt: f64,
 ) -> f64 {
-    let swing = |torque: f64, k: f64| -> f64 {
-        torque / p.inertia * (1.0 / (k * speed.abs()).max(f64::MIN_POSITIVE)).min(dt)
-    };
-    let mut variance = 0.0;
-    if ripple {
-        let a = swing(
+    periodic_torques(p, ripple, cogging, current)
+        .map(|(torque, k)| {
+            let a = torque / p.inertia * (1.0 / (k * speed.abs()).max(f64::MIN_POSITIVE)).min(dt);
+            0.5 * a * a
+        })
+        .sum()
+}
+
+/// The amplitude `T` and angular order `k` of each angle-periodic torque `T sin(k theta)`
+/// that is on: the ripple (`K_t I B`, `3 N`) and cogging (`C`, `N / 2`).
+fn periodic_torques(
+    p: WheelParams<f64>,
+    ripple: bool,
+    cogging: bool,
+    current: f64,
+) -> impl Iterator<Item = (f64, f64)> {
+    let ripple = ripple.then(|| {
+        (
             (p.torque_constant * current * p.torque_ripple).abs(),
             3.0 * p.poles,
-        );
-        variance += 0.5 * a * a;
-    }
-    if cogging {
-        let a = swing(p.cogging.abs(), 0.5 * p.poles);
-        variance += 0.5 * a * a;
-    }
-    variance
+        )
+    });
+    let cogging = cogging.then(|| (p.cogging.abs(), 0.5 * p.poles));
+    ripple.into_iter().chain(cogging)
 }
 
 /// Variance of the lasting kick that ripple and cogging of unknown phase give the mean
@@ -315,23 +323,14 @@ fn crossing_kick(
     acceleration: f64,
     dt: f64,
 ) -> f64 {
-    let kick = |torque: f64, k: f64| -> f64 {
-        let impulse = torque / p.inertia;
-        let fresnel = std::f64::consts::PI * impulse * impulse
-            / (k * acceleration.abs()).max(f64::MIN_POSITIVE);
-        fresnel.min(0.5 * (impulse * 10.0 * dt).powi(2))
-    };
-    let mut variance = 0.0;
-    if ripple {
-        variance += kick(
-            (p.torque_constant * current * p.torque_ripple).abs(),
-            3.0 * p.poles,
-        );
-    }
-    if cogging {
-        variance += kick(p.cogging.abs(), 0.5 * p.poles);
-    }
-    variance
+    periodic_torques(p, ripple, cogging, current)
+        .map(|(torque, k)| {
+            let impulse = torque / p.inertia;
+            let fresnel = std::f64::consts::PI * impulse * impulse
+                / (k * acceleration.abs()).max(f64::MIN_POSITIVE);
+            fresnel.min(0.5 * (impulse * 10.0 * dt).powi(2))
+        })
+        .sum()
 }
 
 /// The smallest current jump within one sample, relative to the current's range over the
@@ -354,10 +353,11 @@ fn track_kicks(
     speed: &mut [f64],
     spread: &mut [f64],
 ) -> bool {
-    // Only a command step (and a zero crossing) kicks: a current that moves a little every sample (a smooth
-    // command held per sample) kicks by as little each time, a random walk far below one
-    // step's kick, and the filter would chase the readings' own swing instead (aliased,
-    // it is slow wherever the speed sweeps past a multiple of the sample rate).
+    // A current jump kicks only at a command step (a zero crossing always kicks): a
+    // current that moves a little every sample (a smooth command held per sample) kicks by
+    // as little each time, a random walk far below one step's kick, and the filter would
+    // chase the readings' own swing instead (aliased, it is slow wherever the speed sweeps
+    // past a multiple of the sample rate).
     let (lo, hi) = current
         .iter()
         .filter(|v| v.is_finite())
