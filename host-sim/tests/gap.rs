@@ -1323,3 +1323,39 @@ fn an_effect_in_a_record_of_another_timing_is_diagnosed_under_both() {
         "{timing:#}"
     );
 }
+
+#[test]
+fn ramped_inputs_keep_attribution_and_reject_nothing_spurious() {
+    // A third input family the diagnoser was not developed on: continuous commands with
+    // kinks and no jumps (`--excitation ramps`). Two wheel effects and a valve leak at
+    // ratio 4, and one no-effect set each.
+    for (plant, only) in [
+        (
+            "reaction_wheel",
+            vec!["viscous_temperature", "lubricant_torque_noise"],
+        ),
+        ("valve", vec!["internal_leak"]),
+    ] {
+        let opts = BenchOptions {
+            plants: vec![plant.into()],
+            seeds: 1,
+            ratios: vec![4.0],
+            seed: 5,
+            only: only.iter().map(|e| e.to_string()).collect(),
+            extra_sets: 1,
+            excitation: Excitation::Ramps,
+            ..BenchOptions::default()
+        };
+        let sets: Vec<Dataset> = generate(plant, &opts)
+            .unwrap()
+            .into_iter()
+            .filter(|d| matches!(d.label.kind, CaseKind::Single | CaseKind::None))
+            .collect();
+        assert_eq!(sets.len(), only.len() + 1);
+        let outcomes: Vec<_> = sets.iter().map(|d| run_one(d).unwrap()).collect();
+        let sc = score(&outcomes, |r| r >= 2.0);
+        assert_eq!(sc.top1, 1.0, "{plant}: {outcomes:#?}");
+        assert_eq!(sc.false_attribution, 0.0, "{plant}: {outcomes:#?}");
+        assert!(sc.median_shrink > 0.8, "{plant}: {}", sc.median_shrink);
+    }
+}

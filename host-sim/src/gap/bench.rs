@@ -312,8 +312,9 @@ impl Default for Variation {
 }
 
 /// How the bench excites its truth plants. The diagnoser was developed on `Steps`; `Smooth`
-/// is a second input family (sums of slow sinusoids, other valve timings and supply
-/// pressures) that checks nothing was tuned to the staircases.
+/// (sums of slow sinusoids, other valve timings and supply pressures) and `Ramps`
+/// (continuous commands with kinks, no jumps) check that nothing was tuned to the
+/// staircases.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum Excitation {
     /// Piecewise-constant commands held for a random time (the bench's default).
@@ -322,6 +323,38 @@ pub enum Excitation {
     /// Sums of sinusoids with random periods and phases (valve: shorter and longer holds,
     /// drifting supply pressure).
     Smooth,
+    /// Piecewise-linear commands between random levels over random durations (valve: holds
+    /// of 2-10 s and a supply pressure ramping between levels).
+    Ramps,
+}
+
+/// Piecewise-linear through random levels in `mean +- amplitude`, one knot every
+/// `durations` (uniform), starting at a random level.
+fn ramp_signal(
+    rng: &mut SimRng,
+    t: &[f64],
+    mean: f64,
+    amplitude: f64,
+    durations: (f64, f64),
+) -> Vec<f64> {
+    let t0 = t.first().copied().unwrap_or(0.0);
+    let end = t.last().copied().unwrap_or(0.0);
+    let mut knots = vec![(t0, mean + amplitude * (2.0 * uniform(rng) - 1.0))];
+    while knots.last().is_some_and(|k| k.0 <= end) {
+        let next =
+            knots[knots.len() - 1].0 + durations.0 + (durations.1 - durations.0) * uniform(rng);
+        knots.push((next, mean + amplitude * (2.0 * uniform(rng) - 1.0)));
+    }
+    let mut segment = 0;
+    t.iter()
+        .map(|&t| {
+            while segment + 2 < knots.len() && knots[segment + 1].0 < t {
+                segment += 1;
+            }
+            let ((ta, a), (tb, b)) = (knots[segment], knots[segment + 1]);
+            a + (b - a) * ((t - ta) / (tb - ta)).clamp(0.0, 1.0)
+        })
+        .collect()
 }
 
 /// `mean + amplitude * s(t)` where `s` is a sum of `count` sinusoids with log-uniform
@@ -522,6 +555,7 @@ impl BenchPlant for WheelBench {
                 let mean = -1.5 + 3.0 * uniform(&mut rng);
                 smooth_signal(&mut rng, &t, mean, 4.0, (40.0, 400.0), 4)
             }
+            Excitation::Ramps => ramp_signal(&mut rng, &t, 0.0, 4.5, (20.0, 120.0)),
         };
         let temp_phase = std::f64::consts::TAU * uniform(&mut rng);
         let noise_phase = std::f64::consts::TAU * uniform(&mut rng);
@@ -705,6 +739,10 @@ impl BenchPlant for MotorBench {
                 smooth_signal(&mut rng, &data.t, 0.0, 12.0, (0.4, 6.0), 5),
                 smooth_signal(&mut rng, &data.t, 0.01, 0.01, (2.0, 15.0), 2),
             ),
+            Excitation::Ramps => (
+                ramp_signal(&mut rng, &data.t, 0.0, 12.0, (0.3, 3.0)),
+                ramp_signal(&mut rng, &data.t, 0.01, 0.01, (1.0, 6.0)),
+            ),
         };
         data.inputs.insert("voltage".into(), voltage);
         data.inputs.insert("load_torque".into(), load);
@@ -800,6 +838,7 @@ impl BenchPlant for ValveBench {
         let (hold_min, hold_span) = match self.vary.excitation {
             Excitation::Steps => (3.0, 3.0),
             Excitation::Smooth => (1.5, 7.5),
+            Excitation::Ramps => (2.0, 8.0),
         };
         while k < n {
             let hold = ((hold_min + hold_span * uniform(&mut rng)) / dt) as usize;
@@ -822,6 +861,7 @@ impl BenchPlant for ValveBench {
             Excitation::Smooth => {
                 smooth_signal(&mut rng, &data.t, pl, 0.15 * (pl - pr), (30.0, 120.0), 2)
             }
+            Excitation::Ramps => ramp_signal(&mut rng, &data.t, pl, 0.15 * (pl - pr), (10.0, 40.0)),
         };
         data.inputs.insert("pl".into(), supply);
         data.inputs.insert("pr".into(), vec![pr; n]);
@@ -948,6 +988,7 @@ impl BenchPlant for ScooterBench {
                 voltage
             }
             Excitation::Smooth => smooth_signal(&mut rng, &data.t, 1.0, 2.0, (2.0, 20.0), 4),
+            Excitation::Ramps => ramp_signal(&mut rng, &data.t, 1.0, 2.0, (1.0, 8.0)),
         };
         data.inputs.insert("voltage".into(), voltage);
         let mut params = ScooterGapPlant.default_params();
@@ -2158,7 +2199,7 @@ mod tests {
         // The ratio is measured against the user's model replayed from the clean run's
         // start: whatever the inputs and the drawn parameters, that replay is the truth
         // without the effect. (A window-fitted start put a smooth wheel record at 31.)
-        for excitation in [Excitation::Steps, Excitation::Smooth] {
+        for excitation in [Excitation::Steps, Excitation::Smooth, Excitation::Ramps] {
             for model_spread in [0.0, 0.4] {
                 let vary = Variation {
                     excitation,
@@ -2181,6 +2222,28 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn ramps_are_continuous_within_their_range_and_pass_through_their_levels() {
+        let mut rng = stream_rng(3, 11);
+        let t: Vec<f64> = (0..6000).map(|k| k as f64 * 0.05).collect();
+        let r = ramp_signal(&mut rng, &t, 1.0, 2.0, (20.0, 120.0));
+        assert_eq!(r.len(), t.len());
+        assert!(r.iter().all(|v| (-1.0..=3.0).contains(v)));
+        // The steepest ramp crosses the whole range in the shortest duration.
+        let steepest = 4.0 / 20.0 * 0.05;
+        assert!(
+            r.windows(2)
+                .all(|w| (w[1] - w[0]).abs() <= steepest + 1e-12)
+        );
+        // Kinks: the slope changes, and a 300 s record holds at least 2 of them.
+        let slopes: Vec<f64> = r.windows(2).map(|w| w[1] - w[0]).collect();
+        let kinks = slopes
+            .windows(2)
+            .filter(|s| (s[1] - s[0]).abs() > 1e-9)
+            .count();
+        assert!((2..=30).contains(&kinks), "{kinks} kinks");
     }
 
     #[test]
