@@ -1359,3 +1359,47 @@ fn ramped_inputs_keep_attribution_and_reject_nothing_spurious() {
         assert!(sc.median_shrink > 0.8, "{plant}: {}", sc.median_shrink);
     }
 }
+
+/// `csv` with column `name` read through `reading` (every other cell unchanged).
+fn with_column_read(csv: &str, name: &str, reading: impl Fn(f64) -> f64) -> String {
+    let header = csv.lines().next().unwrap();
+    let column = header.split(',').position(|c| c == name).unwrap();
+    let mut out = format!("{header}\n");
+    for l in csv.lines().skip(1) {
+        let cells: Vec<String> = l
+            .split(',')
+            .enumerate()
+            .map(|(i, c)| match c.parse::<f64>() {
+                Ok(v) if i == column && v.is_finite() => format!("{}", reading(v)),
+                _ => c.to_string(),
+            })
+            .collect();
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn a_truncating_converter_is_a_quantiser_not_a_bias() {
+    // `step * floor(y / step)`, as an integer conversion writes, lowers every reading by
+    // half a step on average. With the thresholds fixed at round-to-nearest the quantiser
+    // lost to a sensor bias; its threshold is now fitted. Steps of about 6 noise std.
+    let dir = scratch("floor-quantiser");
+    let mut d = named(
+        generated("scooter", &["sensor_bias"], &[2.0], 7, 1),
+        "scooter-none-s0",
+    );
+    let step = 0.015;
+    d.csv = with_column_read(&d.csv, "y:rear_speed", |v| step * (v / step).floor());
+    let (_, v) = diagnose(&dir, &d);
+    assert_eq!(
+        v["verdict"], "quantisation:rear_speed",
+        "{}",
+        v["ranking"][0]
+    );
+    let params = &v["ranking"][0]["params"];
+    let value = |i: usize| params[i][1].as_f64().unwrap();
+    assert!((value(0) / step - 1.0).abs() < 1e-6, "{params}");
+    assert!((value(2) - 0.5).abs() < 0.05, "threshold {params}");
+}

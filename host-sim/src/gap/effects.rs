@@ -19,8 +19,9 @@ use argmin::solver::neldermead::NelderMead;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
-/// A fitted quantiser on one channel: its `(step, offset)` and its input, the candidate's
-/// replay of that channel without the quantiser.
+/// A fitted quantiser on one channel: its `(step, noise before it)` and its input, the
+/// candidate's replay of that channel without the quantiser, shifted so that the quantiser
+/// rounds it to the nearest multiple of the step (see [`GenericKind::Quantisation`]).
 pub type QuantiserReplay = ((f64, f64), Vec<f64>);
 
 /// Samples per window of [`innovation_means_p`]: 5 s at the wheel's 20 Hz, long against
@@ -74,8 +75,10 @@ pub enum GenericKind {
     SensorBias,
     /// `y = (1 + s) y_model`.
     SensorScale,
-    /// `y = q round((y_model + e) / q)` with sensor noise `e` of std `s` before the
-    /// quantiser; predicted by its conditional mean (see [`quantised_mean`]).
+    /// `y = c + q round((y_model + e - c) / q - h)` with sensor noise `e` of std `s` before
+    /// the quantiser, thresholds `h` steps above round-to-nearest (`h = 0.5`: floor, as a
+    /// truncating converter does) and the readings' lattice offset `c` (read from the data,
+    /// not fitted); predicted by its conditional mean (see [`quantised_mean`]).
     Quantisation,
     /// `y(t) = y_model(t - d)`.
     MeasurementDelay,
@@ -123,8 +126,9 @@ impl GenericKind {
             GenericKind::SensorBias => "`y = y_model + bias`",
             GenericKind::SensorScale => "`y = (1 + scale_error) y_model`",
             GenericKind::Quantisation => {
-                "`y = step round((y_model + e) / step)`, sensor noise `e` (std `noise_std`) \
-                 before the quantiser"
+                "`y = c + step round((y_model + e - c) / step - threshold)`, sensor noise `e` \
+                 (std `noise_std`) before the quantiser, `threshold` in steps above \
+                 round-to-nearest (0.5: floor), `c` the readings' lattice offset"
             }
             GenericKind::MeasurementDelay => "`y(t) = y_model(t - delay_s)`",
             GenericKind::OutputSaturation => "`y = clamp(y_model, -limit, limit)`",
@@ -159,7 +163,7 @@ impl GenericKind {
         match self {
             GenericKind::SensorBias => &["bias"],
             GenericKind::SensorScale => &["scale_error"],
-            GenericKind::Quantisation => &["step", "noise_std"],
+            GenericKind::Quantisation => &["step", "noise_std", "threshold"],
             GenericKind::MeasurementDelay => &["delay_s"],
             GenericKind::OutputSaturation => &["limit"],
             GenericKind::DeadZone => &["width"],
@@ -180,6 +184,7 @@ impl GenericKind {
             GenericKind::Quantisation => vec![
                 (0.05 * sigma, (0.25 * span).max(sigma), Scale::Log),
                 (1e-3 * sigma, 2.0 * sigma, Scale::Log),
+                (-0.5, 0.5, Scale::Linear),
             ],
             GenericKind::MeasurementDelay => vec![(0.0, 25.0 * dt, Scale::Linear)],
             GenericKind::OutputSaturation => vec![(0.05 * a, a, Scale::Linear)],
@@ -191,7 +196,8 @@ impl GenericKind {
     }
 
     /// Applies the effect with parameters `params` (in [`GenericKind::param_names`] order;
-    /// missing ones are 0) to a replayed output sampled every `dt`.
+    /// missing ones are 0; a quantiser's lattice offset `c` follows its parameters) to a
+    /// replayed output sampled every `dt`.
     pub fn apply(self, params: &[f64], y: &[f64], dt: f64) -> Vec<f64> {
         let p = params.first().copied().unwrap_or(0.0);
         match self {
@@ -199,7 +205,11 @@ impl GenericKind {
             GenericKind::SensorScale => y.iter().map(|v| v * (1.0 + p)).collect(),
             GenericKind::Quantisation => {
                 let noise = params.get(1).copied().unwrap_or(0.0);
-                y.iter().map(|v| quantised_mean(*v, p, noise)).collect()
+                let shift = quantiser_shift(params);
+                let lattice = params.get(3).copied().unwrap_or(0.0);
+                y.iter()
+                    .map(|v| lattice + quantised_mean(v - shift, p, noise))
+                    .collect()
             }
             GenericKind::MeasurementDelay => {
                 let shift = (p / dt).max(0.0);
@@ -230,6 +240,28 @@ impl GenericKind {
             }
         }
     }
+}
+
+/// What a quantiser with `params` (step, noise, threshold, lattice offset) subtracts from its
+/// input before rounding to the nearest multiple of the step: `c + h q`.
+fn quantiser_shift(params: &[f64]) -> f64 {
+    let at = |i: usize| params.get(i).copied().unwrap_or(0.0);
+    at(3) + at(2) * at(0)
+}
+
+/// The offset `c` of a lattice `c + j q` that the readings `y` lie on (their circular mean
+/// residue modulo `q`, in `[-q/2, q/2]`; 0 when nothing is finite).
+pub fn lattice_offset(y: &[f64], q: f64) -> f64 {
+    let (mut sin, mut cos) = (0.0, 0.0);
+    for v in y.iter().filter(|v| v.is_finite()) {
+        let phase = std::f64::consts::TAU * (v / q - (v / q).round());
+        sin += phase.sin();
+        cos += phase.cos();
+    }
+    if sin == 0.0 && cos == 0.0 {
+        return 0.0;
+    }
+    q * sin.atan2(cos) / std::f64::consts::TAU
 }
 
 /// Expected reading of a quantiser of step `q` whose input is `v` plus Gaussian noise of
@@ -486,7 +518,9 @@ impl<'a> Problem<'a> {
                     if let (GenericKind::Quantisation, Some(q)) =
                         (kind, lattice_step(&self.measured[*ch]))
                     {
-                        ranges[0] = (0.98 * q, 1.02 * q, Scale::Linear);
+                        // The readings give the step to float precision; over thousands of
+                        // steps a step off by a fraction of a percent misplaces the lattice.
+                        ranges[0] = (q, q, Scale::Linear);
                     }
                     for (name, (lo, hi, scale)) in kind.param_names().iter().zip(ranges) {
                         dims.push(Dim {
@@ -503,6 +537,18 @@ impl<'a> Problem<'a> {
         dims
     }
 
+    /// A quantiser's fitted values followed by its channel's lattice offset (other kinds'
+    /// values unchanged).
+    fn with_lattice(&self, kind: GenericKind, ch: usize, values: &[f64]) -> Vec<f64> {
+        let mut v = values.to_vec();
+        if kind == GenericKind::Quantisation {
+            v.resize(3, 0.0);
+            let y = &self.measured[ch];
+            v.push(lattice_step(y).map_or(0.0, |q| lattice_offset(y, q)));
+        }
+        v
+    }
+
     /// Applies the generic components of `fitted` to a replay.
     fn apply_generic(
         &self,
@@ -512,7 +558,7 @@ impl<'a> Problem<'a> {
         for (c, values) in fitted {
             if let Component::Generic(kind, ch) = c {
                 let y = &mut outputs[*ch];
-                *y = kind.apply(values, y, self.data.dt);
+                *y = kind.apply(&self.with_lattice(*kind, *ch, values), y, self.data.dt);
             }
         }
         outputs
@@ -524,20 +570,42 @@ impl<'a> Problem<'a> {
     /// sensor effect (bias, scale, saturation, ...), the effect itself, which a slow plant
     /// would carry through the whole record.
     /// A quantiser is applied after the refit: through its staircase one Gauss-Newton step
-    /// lands anywhere, and its rounding averages out of the fit without it.
+    /// lands anywhere, and its rounding averages out of the fit without it (all but its
+    /// thresholds' offset, a bias of `-threshold step`, which the refit sees).
     fn with_refitted_start(&self, raw: Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
         let (quantisers, others): (Vec<_>, Vec<_>) = fitted
             .iter()
             .cloned()
             .partition(|(c, _)| matches!(c, Component::Generic(GenericKind::Quantisation, _)));
-        let outputs = refit_start(
+        // What a quantiser's rounding leaves on average is its thresholds' offset: the
+        // refit sees it as a bias, which comes off again before the quantiser acts.
+        let offsets: Vec<(usize, f64)> = quantisers
+            .iter()
+            .filter_map(|(c, v)| match c {
+                Component::Generic(_, ch) => Some((
+                    *ch,
+                    v.get(2).copied().unwrap_or(0.0) * v.first().copied().unwrap_or(0.0),
+                )),
+                Component::Plant(_) => None,
+            })
+            .collect();
+        let mut outputs = refit_start(
             &raw.outputs,
             &self.init_sensitivity,
             &self.measured,
             &self.sigma,
             |k| self.train[k],
-            |outputs| self.apply_generic(outputs, &others),
+            |outputs| {
+                let mut out = self.apply_generic(outputs, &others);
+                for &(ch, offset) in &offsets {
+                    out[ch].iter_mut().for_each(|v| *v -= offset);
+                }
+                out
+            },
         );
+        for &(ch, offset) in &offsets {
+            outputs[ch].iter_mut().for_each(|v| *v += offset);
+        }
         Simulation {
             outputs: self.apply_generic(outputs, &quantisers),
             states: raw.states,
@@ -977,17 +1045,19 @@ impl<'a> Problem<'a> {
     fn quantiser_on(&self, fitted: &[(Component, Vec<f64>)], c: usize) -> Option<QuantiserReplay> {
         let on_c = |comp: &Component| matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c);
         let (_, v) = fitted.iter().find(|(comp, _)| on_c(comp))?;
-        let parameters = (
-            v.first().copied().unwrap_or(0.0),
-            v.get(1).copied().unwrap_or(0.0),
-        );
+        let v = self.with_lattice(GenericKind::Quantisation, c, v);
+        let parameters = (v[0], v[1]);
+        let shift = quantiser_shift(&v);
         let others: Vec<(Component, Vec<f64>)> = fitted
             .iter()
             .filter(|(comp, _)| !on_c(comp))
             .cloned()
             .collect();
-        let input = self.predict(&others).ok()?.outputs.get(c)?.clone();
-        Some((parameters, input))
+        let sim = self.predict(&others).ok()?;
+        Some((
+            parameters,
+            sim.outputs.get(c)?.iter().map(|v| v - shift).collect(),
+        ))
     }
 
     /// Per channel, the reading variance per sample that a quantiser among `fitted`
@@ -1134,7 +1204,7 @@ impl<'a> Problem<'a> {
             (0..dims.len()).collect()
         };
         for _ in 0..passes {
-            for &i in &order {
+            for &i in order.iter().filter(|&&i| dims[i].lo < dims[i].hi) {
                 let (value, cost) = self.line_search(components, &dims, &theta, i, grid, golden);
                 // A tie moves too: on a plateau the line search keeps the value that
                 // changes the model least, which the start need not be.
@@ -1745,6 +1815,27 @@ mod tests {
         // The direct sum meets it where the two branches meet.
         let v = quantised_variance(0.3, 1.0, 0.4999);
         assert!((v - (0.25 + 1.0 / 12.0)).abs() < 0.01, "{v}");
+    }
+
+    #[test]
+    fn a_quantiser_floors_with_its_threshold_and_reads_on_its_lattice() {
+        let y = [0.2, 0.7, 1.2, -0.2, -0.7, 2.99];
+        let q = GenericKind::Quantisation;
+        // Threshold half a step up: floor, as a truncating converter reads.
+        let floor: Vec<f64> = y.iter().map(|v: &f64| v.floor()).collect();
+        assert_eq!(q.apply(&[1.0, 0.0, 0.5, 0.0], &y, 1.0), floor);
+        // Lattice 0.25 + j: the nearest such point.
+        assert_eq!(
+            q.apply(&[1.0, 0.0, 0.0, 0.25], &y, 1.0),
+            [0.25, 0.25, 1.25, 0.25, -0.75, 3.25]
+        );
+        // The lattice offset is read back from the readings, also across the wrap at q/2.
+        for c in [0.0, 0.1, -0.3, 0.49, -0.5] {
+            let readings: Vec<f64> = (-40..40).map(|j| 0.02 * j as f64 + 0.02 * c).collect();
+            let back = lattice_offset(&readings, 0.02);
+            let wrapped = (back - 0.02 * c) / 0.02;
+            assert!((wrapped - wrapped.round()).abs() < 1e-9, "{c}: {back}");
+        }
     }
 
     #[test]

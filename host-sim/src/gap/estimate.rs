@@ -59,6 +59,9 @@ impl ChannelSensor {
                     // staircase of its mean the sigma points would see steps, not a slope.
                     let before = values.get(1).copied().unwrap_or(sigma);
                     sigma = (before * before + p * p / 12.0).sqrt();
+                    // Thresholds above round-to-nearest lower the mean reading.
+                    let threshold = values.get(2).copied().unwrap_or(0.0);
+                    maps.push((GenericKind::SensorBias, vec![-threshold * p]));
                 }
                 _ => maps.push((*kind, values.clone())),
             }
