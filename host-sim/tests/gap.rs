@@ -1403,3 +1403,39 @@ fn a_truncating_converter_is_a_quantiser_not_a_bias() {
     assert!((value(0) / step - 1.0).abs() < 1e-6, "{params}");
     assert!((value(2) - 0.5).abs() < 0.05, "threshold {params}");
 }
+
+#[test]
+fn jittered_stamps_around_uniform_sampling_are_replayed_on_the_grid() {
+    // A logger's stamps off by up to 2 % of a sample around uniform sampling. Replayed at
+    // the stamped times, the wheel's precise speed sensor (noise 3e-3 rad/s while the
+    // wheel accelerates at rad/s^2) saw the timing error as a gap no current bias
+    // explains: `unknown` (shrink 0.83, one held-out block at p 2e-17).
+    let dir = scratch("jitter");
+    let mut d = named(
+        generated("reaction_wheel", &["sensor_bias"], &[4.0], 606, 0),
+        "reaction_wheel-sensor_bias-r4-s0",
+    );
+    assert_eq!(d.label.channel.as_deref(), Some("y:current"));
+    let mut state = 12345u64;
+    let mut lines = d.csv.lines();
+    let mut csv = format!("{}\n", lines.next().unwrap());
+    for (k, line) in lines.enumerate() {
+        let (t, rest) = line.split_once(',').unwrap();
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let u = (state >> 11) as f64 / (1u64 << 53) as f64;
+        let t: f64 = t.parse().unwrap();
+        let jitter = if k == 0 { 0.0 } else { 0.001 * (2.0 * u - 1.0) };
+        csv.push_str(&format!("{},{rest}\n", t + jitter));
+    }
+    d.csv = csv;
+    let (_, v) = diagnose(&dir, &d);
+    assert_eq!(v["verdict"], "sensor_bias:current", "{}", v["ranking"][0]);
+    assert!(v["ranking"][0]["shrink"].as_f64().unwrap() > 0.9);
+    let warnings = v["warnings"].to_string();
+    assert!(
+        warnings.contains("replayed on a uniform grid"),
+        "{warnings}"
+    );
+}

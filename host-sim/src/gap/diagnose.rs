@@ -378,6 +378,18 @@ fn diagnose_timed(
         .iter()
         .map(|t| read.with_timing(*t, native, &sampled))
         .collect();
+    // Stamps a little off a uniform grid are either the true sample times or a logger's
+    // jitter (or rounding) around uniform sampling; the user's model decides below.
+    let regridded: Vec<PlantData> = match uniform_grid(&read.t) {
+        Some(grid) => readings
+            .iter()
+            .map(|r| PlantData {
+                t: grid.clone(),
+                ..r.clone()
+            })
+            .collect(),
+        None => Vec::new(),
+    };
     let data = &readings[0];
     let train: Vec<bool> = (0..n).map(|k| (k * BLOCKS / n).is_multiple_of(2)).collect();
     let test: Vec<bool> = train.iter().map(|b| !b).collect();
@@ -468,6 +480,30 @@ fn diagnose_timed(
     };
     problem.refit_nominal();
     let timing = choose_timing(&mut problem, &timings, &readings);
+    if !regridded.is_empty() {
+        let chosen = timings
+            .iter()
+            .position(|t| *t == timing.timing)
+            .unwrap_or(0);
+        let (stamped, _) = problem.train_chi2(&problem.nominal);
+        let deviation = grid_deviation(&read.t);
+        if let Ok(on_grid) = problem.replayed_on(&regridded[chosen]) {
+            let (gridded, _) = on_grid.train_chi2(&on_grid.nominal);
+            let kept = if gridded < stamped - TIMING_MARGIN {
+                problem = on_grid;
+                "replayed on a uniform grid instead"
+            } else {
+                "replayed at the stamped times"
+            };
+            warnings.push(format!(
+                "{}: column `t` strays from a uniform grid by up to {:.3} samples; {kept} \
+                 (the user's model's training chi-square: stamped {stamped:.1}, uniform \
+                 {gridded:.1})",
+                csv_path.display(),
+                deviation
+            ));
+        }
+    }
     let contested = timing.contested;
     refine_noise_from_residuals(&mut problem, &mut noise);
     let mut report = analyse(&problem);
@@ -665,6 +701,32 @@ fn choose_timing<'a>(
         contested,
         gap_left: Vec::new(),
     }
+}
+
+/// Largest distance, in samples, of the stamps `t` from the uniform grid through their
+/// first and last.
+fn grid_deviation(t: &[f64]) -> f64 {
+    let (Some(first), Some(last)) = (t.first(), t.last()) else {
+        return 0.0;
+    };
+    let step = (last - first) / (t.len().max(2) - 1) as f64;
+    t.iter()
+        .enumerate()
+        .map(|(k, v)| ((v - first - k as f64 * step) / step).abs())
+        .fold(0.0, f64::max)
+}
+
+/// The uniform grid through the first and last stamps of `t` when the stamps stray from
+/// it, by a quarter of a sample at most (jitter or rounding, not gaps or irregular
+/// sampling); `None` when they lie on it (to float precision) or stray further.
+fn uniform_grid(t: &[f64]) -> Option<Vec<f64>> {
+    let deviation = grid_deviation(t);
+    if !(1e-6..=0.25).contains(&deviation) {
+        return None;
+    }
+    let (first, last) = (t[0], t[t.len() - 1]);
+    let step = (last - first) / (t.len() - 1) as f64;
+    Some((0..t.len()).map(|k| first + k as f64 * step).collect())
 }
 
 /// Converts each column the meta file's `[units]` gives in another unit than the plant
