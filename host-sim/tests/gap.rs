@@ -1439,3 +1439,46 @@ fn jittered_stamps_around_uniform_sampling_are_replayed_on_the_grid() {
         "{warnings}"
     );
 }
+
+#[test]
+fn a_sensor_range_not_symmetric_about_zero_is_a_saturation() {
+    // Motor speed clipped at 0.7 of its highest and 0.9 of its lowest reading. One limit,
+    // +-L, cannot fit both ends: two ramps-excited motor records clipped like this were
+    // `unknown` with the symmetric clip.
+    let dir = scratch("asymmetric-clip");
+    let mut d = named(
+        generated("dc_motor", &["sensor_bias"], &[2.0], 7, 1),
+        "dc_motor-none-s0",
+    );
+    let column = d
+        .csv
+        .lines()
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|c| c == "y:speed")
+        .unwrap();
+    let speeds: Vec<f64> = d
+        .csv
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split(',').nth(column)?.parse().ok())
+        .collect();
+    let hi = 0.7 * speeds.iter().copied().fold(f64::MIN, f64::max);
+    let lo = 0.9 * speeds.iter().copied().fold(f64::MAX, f64::min);
+    assert!(
+        lo < 0.0 && hi > 0.0 && (hi + lo).abs() > 0.1 * hi,
+        "{lo} {hi}"
+    );
+    d.csv = with_column_read(&d.csv, "y:speed", |v| v.max(lo).min(hi));
+    let (_, v) = diagnose(&dir, &d);
+    assert_eq!(
+        v["verdict"], "output_saturation:speed",
+        "{}",
+        v["ranking"][0]
+    );
+    let params = &v["ranking"][0]["params"];
+    let value = |i: usize| params[i][1].as_f64().unwrap();
+    assert!((value(0) / hi - 1.0).abs() < 0.01, "{params}");
+    assert!((value(1) / lo - 1.0).abs() < 0.01, "{params}");
+}
