@@ -82,7 +82,7 @@ pub enum GenericKind {
     Quantisation,
     /// `y(t) = y_model(t - d)`.
     MeasurementDelay,
-    /// `y = clamp(y_model, c - L, c + L)`: a range of half-width `L` about `c` (0 by default).
+    /// `y = clamp(y_model, -L, L)`.
     OutputSaturation,
     /// `y = sign(y_model) max(|y_model| - d, 0)`.
     DeadZone,
@@ -131,7 +131,7 @@ impl GenericKind {
                  round-to-nearest (0.5: floor), `c` the readings' lattice offset"
             }
             GenericKind::MeasurementDelay => "`y(t) = y_model(t - delay_s)`",
-            GenericKind::OutputSaturation => "`y = clamp(y_model, centre - limit, centre + limit)`",
+            GenericKind::OutputSaturation => "`y = clamp(y_model, -limit, limit)`",
             GenericKind::DeadZone => "`y = sign(y_model) max(abs(y_model) - width, 0)`",
             GenericKind::FirstOrderLag => "first-order sensor lag, time constant `tau_s`",
         }
@@ -165,7 +165,7 @@ impl GenericKind {
             GenericKind::SensorScale => &["scale_error"],
             GenericKind::Quantisation => &["step", "noise_std", "threshold"],
             GenericKind::MeasurementDelay => &["delay_s"],
-            GenericKind::OutputSaturation => &["limit", "centre"],
+            GenericKind::OutputSaturation => &["limit"],
             GenericKind::DeadZone => &["width"],
             GenericKind::FirstOrderLag => &["tau_s"],
         }
@@ -187,11 +187,7 @@ impl GenericKind {
                 (-0.5, 0.5, Scale::Linear),
             ],
             GenericKind::MeasurementDelay => vec![(0.0, 25.0 * dt, Scale::Linear)],
-            // A sensor's range need not be symmetric about zero; the centre starts at 0, so
-            // the first pass fits the symmetric clip.
-            GenericKind::OutputSaturation => {
-                vec![(0.05 * a, a, Scale::Linear), (-a, a, Scale::Linear)]
-            }
+            GenericKind::OutputSaturation => vec![(0.05 * a, a, Scale::Linear)],
             // From below the noise: on a precise sensor with a large swing a tenth of a
             // thousandth of the swing is still many noise stds.
             GenericKind::DeadZone => vec![((1e-4 * a).min(0.1 * sigma), 0.5 * a, Scale::Log)],
@@ -227,12 +223,7 @@ impl GenericKind {
                     })
                     .collect()
             }
-            GenericKind::OutputSaturation => {
-                let centre = params.get(1).copied().unwrap_or(0.0);
-                y.iter()
-                    .map(|v| v.max(centre - p).min(centre + p))
-                    .collect()
-            }
+            GenericKind::OutputSaturation => y.iter().map(|v| v.clamp(-p, p)).collect(),
             GenericKind::DeadZone => y
                 .iter()
                 .map(|v| v.signum() * (v.abs() - p).max(0.0))
@@ -1824,22 +1815,6 @@ mod tests {
         // The direct sum meets it where the two branches meet.
         let v = quantised_variance(0.3, 1.0, 0.4999);
         assert!((v - (0.25 + 1.0 / 12.0)).abs() < 0.01, "{v}");
-    }
-
-    #[test]
-    fn a_saturation_clips_at_its_own_two_limits() {
-        let y = [-3.0, -1.0, 0.5, 2.0, 4.0];
-        let s = GenericKind::OutputSaturation;
-        assert_eq!(s.apply(&[2.5], &y, 1.0), [-2.5, -1.0, 0.5, 2.0, 2.5]);
-        // [-1.25, 1.75]
-        assert_eq!(
-            s.apply(&[1.5, 0.25], &y, 1.0),
-            [-1.25, -1.0, 0.5, 1.75, 1.75]
-        );
-        // A floor above zero, as a sensor whose range starts there reads: [0.8, 3.2].
-        assert_eq!(s.apply(&[1.2, 2.0], &y, 1.0), [0.8, 0.8, 0.8, 2.0, 3.2]);
-        // A negative half-width reads the centre and does not panic.
-        assert_eq!(s.apply(&[-1.0, 0.5], &y, 1.0), [0.5; 5]);
     }
 
     #[test]

@@ -80,7 +80,7 @@ impl ChannelSensor {
             match kind {
                 GenericKind::SensorBias => y + p,
                 GenericKind::SensorScale => y * (1.0 + p),
-                GenericKind::OutputSaturation => y.max(values.get(1).copied().unwrap_or(-p)).min(p),
+                GenericKind::OutputSaturation => y.clamp(-p, p),
                 GenericKind::DeadZone => y.signum() * (y.abs() - p).max(0.0),
                 GenericKind::Quantisation
                 | GenericKind::MeasurementDelay
