@@ -871,6 +871,10 @@ fn gap_finds_a_clip_of_the_one_peak_by_swapping_the_folds() {
         v["ranking"][0]["effect"]
     );
     assert_eq!(v["held_out_blocks"], "even (from 2)");
+    // The generator clips symmetrically: a lower limit of its own does not pay.
+    let params = &v["ranking"][0]["params"];
+    assert_eq!(params[1][0], format!("{effect}.lower_limit").as_str());
+    assert_eq!(params[1][1].as_f64(), params[0][1].as_f64().map(|l| -l));
 }
 
 #[test]
@@ -1380,6 +1384,16 @@ fn with_column_read(csv: &str, name: &str, reading: impl Fn(f64) -> f64) -> Stri
     out
 }
 
+/// The values of column `name` of `csv`.
+fn column_values(csv: &str, name: &str) -> Vec<f64> {
+    let header = csv.lines().next().unwrap();
+    let column = header.split(',').position(|c| c == name).unwrap();
+    csv.lines()
+        .skip(1)
+        .filter_map(|l| l.split(',').nth(column)?.parse().ok())
+        .collect()
+}
+
 #[test]
 fn a_truncating_converter_is_a_quantiser_not_a_bias() {
     // `step * floor(y / step)`, as an integer conversion writes, lowers every reading by
@@ -1438,4 +1452,81 @@ fn jittered_stamps_around_uniform_sampling_are_replayed_on_the_grid() {
         warnings.contains("replayed on a uniform grid"),
         "{warnings}"
     );
+}
+
+#[test]
+fn a_sensor_range_not_symmetric_about_zero_is_a_saturation() {
+    // Motor speed clipped at 0.7 of its highest and 0.9 of its lowest reading. One limit,
+    // +-L, cannot fit both ends: this record was `unknown` with the symmetric clip.
+    let dir = scratch("asymmetric-clip");
+    let mut d = named(
+        generated("dc_motor", &["sensor_bias"], &[2.0], 7, 1),
+        "dc_motor-none-s0",
+    );
+    let speeds = column_values(&d.csv, "y:speed");
+    let hi = 0.7 * speeds.iter().copied().fold(f64::MIN, f64::max);
+    let lo = 0.9 * speeds.iter().copied().fold(f64::MAX, f64::min);
+    assert!(
+        lo < 0.0 && hi > 0.0 && (hi + lo).abs() > 0.1 * hi,
+        "{lo} {hi}"
+    );
+    d.csv = with_column_read(&d.csv, "y:speed", |v| v.max(lo).min(hi));
+    let (_, v) = diagnose(&dir, &d);
+    assert_eq!(
+        v["verdict"], "output_saturation:speed",
+        "{}",
+        v["ranking"][0]
+    );
+    let params = &v["ranking"][0]["params"];
+    let value = |i: usize| params[i][1].as_f64().unwrap();
+    assert!((value(0) / hi - 1.0).abs() < 0.01, "{params}");
+    assert!((value(1) / lo - 1.0).abs() < 0.01, "{params}");
+}
+
+#[test]
+fn a_deadband_that_zeroes_small_readings_is_a_dead_zone_with_no_shift() {
+    // A low-speed cutoff: the sensor reads 0 while |speed| < d and the speed itself
+    // above (no shift by d), with the noise after it. Read from the truth column, so the
+    // record's own noise stays. The shifted dead zone alone could not fit it (`unknown`).
+    let dir = scratch("zeroing-deadband");
+    let opts = BenchOptions {
+        plants: vec!["dc_motor".into()],
+        seeds: 1,
+        ratios: vec![2.0],
+        seed: 11,
+        only: vec!["sensor_bias".into()],
+        extra_sets: 1,
+        truth_columns: true,
+        ..BenchOptions::default()
+    };
+    let mut d = named(generate("dc_motor", &opts).unwrap(), "dc_motor-none-s0");
+    let header: Vec<&str> = d.csv.lines().next().unwrap().split(',').collect();
+    let y = header.iter().position(|c| *c == "y:speed").unwrap();
+    let x = header.iter().position(|c| *c == "x:speed").unwrap();
+    let rows: Vec<Vec<f64>> = d
+        .csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    let top = rows.iter().map(|r| r[x].abs()).fold(0.0, f64::max);
+    let width = 0.15 * top;
+    let zeroed = rows.iter().filter(|r| r[x].abs() < width).count();
+    assert!(zeroed > 50, "{zeroed}");
+    let mut csv = format!("{}\n", header.join(","));
+    for r in &rows {
+        let mut r = r.clone();
+        let cut = if r[x].abs() < width { 0.0 } else { r[x] };
+        r[y] += cut - r[x];
+        let cells: Vec<String> = r.iter().map(|v| v.to_string()).collect();
+        csv.push_str(&cells.join(","));
+        csv.push('\n');
+    }
+    d.csv = csv;
+    let (_, v) = diagnose(&dir, &d);
+    assert_eq!(v["verdict"], "dead_zone:speed", "{}", v["ranking"][0]);
+    let params = &v["ranking"][0]["params"];
+    let value = |i: usize| params[i][1].as_f64().unwrap();
+    assert!((value(0) / width - 1.0).abs() < 0.02, "{params}");
+    assert!(value(1) < 0.05, "{params}");
 }

@@ -4,7 +4,9 @@
 use crate::dataio::{Recording, read_recording};
 use crate::error::SimError;
 use crate::gap::analysis::{ALPHA, WhereReport, analyse};
-use crate::gap::effects::{Component, Evaluation, GenericKind, Problem, flat_values};
+use crate::gap::effects::{
+    Component, Evaluation, GenericKind, Problem, channel_lattices, flat_values,
+};
 use crate::gap::meta::{GapMeta, read_gap_meta};
 use crate::gap::plant::{
     BUILTIN_PLANTS, GapPlant, InputTiming, PlantData, Simulation, builtin_plant,
@@ -469,6 +471,7 @@ fn diagnose_timed(
         sim_effects: sim_effects.clone(),
         plant_effects,
         outputs: present.iter().map(|(_, n)| n.clone()).collect(),
+        lattices: channel_lattices(&measured),
         measured,
         sigma,
         sigma_dof,
@@ -894,8 +897,7 @@ fn refine_noise_from(
         // A quantised channel's residual is a staircase minus a smooth replay: where the
         // signal moves slowly its second differences are mostly zero and measure the steps,
         // not the noise. Its readings err by at least their rounding, q / sqrt 12.
-        let floor = crate::gap::effects::lattice_step(&problem.measured[c])
-            .map_or(0.0, |q| q / 12f64.sqrt());
+        let floor = problem.lattices[c].map_or(0.0, |(q, _)| q / 12f64.sqrt());
         if let Some((s, dof)) = noise_std_from_differences(&residual)
             && s.max(floor) < ratio * problem.sigma[c]
         {

@@ -82,7 +82,7 @@ pub enum GenericKind {
     Quantisation,
     /// `y(t) = y_model(t - d)`.
     MeasurementDelay,
-    /// `y = clamp(y_model, -L, L)`.
+    /// `y = clamp(y_model, l, L)`, `l = -L` unless a lower limit of its own pays.
     OutputSaturation,
     /// `y = sign(y_model) max(|y_model| - d, 0)`.
     DeadZone,
@@ -128,11 +128,20 @@ impl GenericKind {
             GenericKind::Quantisation => {
                 "`y = c + step round((y_model + e - c) / step - threshold)`, sensor noise `e` \
                  (std `noise_std`) before the quantiser, `threshold` in steps above \
-                 round-to-nearest (0.5: floor), `c` the readings' lattice offset"
+                 round-to-nearest (0.5: floor; 0 unless another threshold pays for its \
+                 parameter), `c` the readings' lattice offset"
             }
             GenericKind::MeasurementDelay => "`y(t) = y_model(t - delay_s)`",
-            GenericKind::OutputSaturation => "`y = clamp(y_model, -limit, limit)`",
-            GenericKind::DeadZone => "`y = sign(y_model) max(abs(y_model) - width, 0)`",
+            GenericKind::OutputSaturation => {
+                "`y = clamp(y_model, lower_limit, limit)`, `lower_limit = -limit` (a symmetric \
+                 range) unless a lower limit of its own pays for its parameter"
+            }
+            GenericKind::DeadZone => {
+                "`y = 0` where `abs(y_model) < width`, else `y_model - sign(y_model) shift \
+                 width`; `shift = 1` (the shifted dead zone `sign(y_model) max(abs(y_model) - \
+                 width, 0)`) unless another shift pays for its parameter (0: readings zeroed \
+                 below `width`, as a low-flow cutoff)"
+            }
             GenericKind::FirstOrderLag => "first-order sensor lag, time constant `tau_s`",
         }
     }
@@ -165,8 +174,8 @@ impl GenericKind {
             GenericKind::SensorScale => &["scale_error"],
             GenericKind::Quantisation => &["step", "noise_std", "threshold"],
             GenericKind::MeasurementDelay => &["delay_s"],
-            GenericKind::OutputSaturation => &["limit"],
-            GenericKind::DeadZone => &["width"],
+            GenericKind::OutputSaturation => &["limit", "lower_limit"],
+            GenericKind::DeadZone => &["width", "shift"],
             GenericKind::FirstOrderLag => &["tau_s"],
         }
     }
@@ -187,22 +196,63 @@ impl GenericKind {
                 (-0.5, 0.5, Scale::Linear),
             ],
             GenericKind::MeasurementDelay => vec![(0.0, 25.0 * dt, Scale::Linear)],
-            GenericKind::OutputSaturation => vec![(0.05 * a, a, Scale::Linear)],
+            GenericKind::OutputSaturation => {
+                vec![(0.05 * a, a, Scale::Linear), (-a, -0.05 * a, Scale::Linear)]
+            }
             // From below the noise: on a precise sensor with a large swing a tenth of a
             // thousandth of the swing is still many noise stds.
-            GenericKind::DeadZone => vec![((1e-4 * a).min(0.1 * sigma), 0.5 * a, Scale::Log)],
+            GenericKind::DeadZone => vec![
+                ((1e-4 * a).min(0.1 * sigma), 0.5 * a, Scale::Log),
+                (0.0, 1.0, Scale::Linear),
+            ],
             GenericKind::FirstOrderLag => vec![(0.1 * dt, 200.0 * dt, Scale::Log)],
         }
     }
 
+    /// Per parameter, where it adds nothing to the effect's simpler form (a
+    /// round-to-nearest quantiser, a symmetric clip, a shifted dead zone), or `None`. Such a
+    /// parameter is held there unless freeing it lowers the training cost by more than its
+    /// BIC penalty.
+    pub fn neutral_values(self) -> &'static [Option<Neutral>] {
+        match self {
+            GenericKind::Quantisation => &[None, None, Some(Neutral::At(0.0))],
+            GenericKind::OutputSaturation => &[None, Some(Neutral::MinusPrevious)],
+            GenericKind::DeadZone => &[None, Some(Neutral::At(1.0))],
+            _ => &[None],
+        }
+    }
+
+    /// The reading of model output `v` under an effect that is a static map of it (bias,
+    /// scale, clip, dead zone) with `params` as in [`GenericKind::apply`]; `None` for a
+    /// quantiser (a random rounding) and the effects with memory.
+    pub fn static_reading(self, params: &[f64], v: f64) -> Option<f64> {
+        let p = params.first().copied().unwrap_or(0.0);
+        match self {
+            GenericKind::SensorBias => Some(v + p),
+            GenericKind::SensorScale => Some(v * (1.0 + p)),
+            GenericKind::OutputSaturation => {
+                Some(v.max(params.get(1).copied().unwrap_or(-p)).min(p))
+            }
+            GenericKind::DeadZone => {
+                let shift = params.get(1).copied().unwrap_or(1.0);
+                Some(if v.abs() < p {
+                    0.0
+                } else {
+                    v - v.signum() * shift * p
+                })
+            }
+            GenericKind::Quantisation
+            | GenericKind::MeasurementDelay
+            | GenericKind::FirstOrderLag => None,
+        }
+    }
+
     /// Applies the effect with parameters `params` (in [`GenericKind::param_names`] order;
-    /// missing ones are 0; a quantiser's lattice offset `c` follows its parameters) to a
-    /// replayed output sampled every `dt`.
+    /// missing ones take their neutral value, else 0; a quantiser's lattice offset `c`
+    /// follows its parameters) to a replayed output sampled every `dt`.
     pub fn apply(self, params: &[f64], y: &[f64], dt: f64) -> Vec<f64> {
         let p = params.first().copied().unwrap_or(0.0);
         match self {
-            GenericKind::SensorBias => y.iter().map(|v| v + p).collect(),
-            GenericKind::SensorScale => y.iter().map(|v| v * (1.0 + p)).collect(),
             GenericKind::Quantisation => {
                 let noise = params.get(1).copied().unwrap_or(0.0);
                 let shift = quantiser_shift(params);
@@ -223,10 +273,12 @@ impl GenericKind {
                     })
                     .collect()
             }
-            GenericKind::OutputSaturation => y.iter().map(|v| v.clamp(-p, p)).collect(),
-            GenericKind::DeadZone => y
+            GenericKind::SensorBias
+            | GenericKind::SensorScale
+            | GenericKind::OutputSaturation
+            | GenericKind::DeadZone => y
                 .iter()
-                .map(|v| v.signum() * (v.abs() - p).max(0.0))
+                .map(|&v| self.static_reading(params, v).unwrap_or(v))
                 .collect(),
             GenericKind::FirstOrderLag => {
                 let alpha = 1.0 - (-dt / p.max(1e-12)).exp();
@@ -240,6 +292,15 @@ impl GenericKind {
             }
         }
     }
+}
+
+/// Where an extension parameter sits when it adds nothing to its effect's simpler form.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Neutral {
+    /// At this value (a quantiser's threshold 0: round to nearest).
+    At(f64),
+    /// At minus the parameter before it (a clip's lower limit: a symmetric range).
+    MinusPrevious,
 }
 
 /// What a quantiser with `params` (step, noise, threshold, lattice offset) subtracts from its
@@ -344,6 +405,10 @@ struct Dim {
     lo: f64,
     hi: f64,
     scale: Scale,
+    /// See [`GenericKind::neutral_values`].
+    neutral: Option<Neutral>,
+    /// Held at its neutral value (searched over no range).
+    pinned: bool,
 }
 
 /// Everything the candidates are fitted and scored against.
@@ -364,6 +429,9 @@ pub struct Problem<'a> {
     pub outputs: Vec<String>,
     /// Measured values per output channel.
     pub measured: Vec<Vec<f64>>,
+    /// Per channel, the step and offset of the lattice its readings lie on (see
+    /// [`channel_lattices`]).
+    pub lattices: Vec<Option<(f64, f64)>>,
     /// Noise std per channel.
     pub sigma: Vec<f64>,
     /// Effective degrees of freedom of each sigma (infinite when declared in meta).
@@ -473,8 +541,7 @@ impl<'a> Problem<'a> {
                 // A quantiser's readings lie on its lattice whatever the noise before it
                 // (`y = q round((y_model + e) / q)`); off a lattice its conditional mean is
                 // only a periodic distortion that mimics other effects.
-                let impossible =
-                    kind == GenericKind::Quantisation && lattice_step(&self.measured[ch]).is_none();
+                let impossible = kind == GenericKind::Quantisation && self.lattices[ch].is_none();
                 if !replaced && !impossible {
                     out.push(Component::Generic(kind, ch));
                 }
@@ -501,6 +568,8 @@ impl<'a> Problem<'a> {
                             lo,
                             hi,
                             scale: r.scale,
+                            neutral: None,
+                            pinned: false,
                         });
                     }
                 }
@@ -515,20 +584,25 @@ impl<'a> Problem<'a> {
                     let span = (hi - lo).max(0.0);
                     let sigma = self.sigma[*ch];
                     let mut ranges = kind.ranges(amplitude, span, sigma, self.data.dt);
-                    if let (GenericKind::Quantisation, Some(q)) =
-                        (kind, lattice_step(&self.measured[*ch]))
-                    {
+                    if let (GenericKind::Quantisation, Some((q, _))) = (kind, self.lattices[*ch]) {
                         // The readings give the step to float precision; over thousands of
                         // steps a step off by a fraction of a percent misplaces the lattice.
                         ranges[0] = (q, q, Scale::Linear);
                     }
-                    for (name, (lo, hi, scale)) in kind.param_names().iter().zip(ranges) {
+                    for ((name, (lo, hi, scale)), neutral) in kind
+                        .param_names()
+                        .iter()
+                        .zip(ranges)
+                        .zip(kind.neutral_values())
+                    {
                         dims.push(Dim {
                             component: ci,
                             name: name.to_string(),
                             lo,
                             hi,
                             scale,
+                            neutral: *neutral,
+                            pinned: false,
                         });
                     }
                 }
@@ -543,8 +617,7 @@ impl<'a> Problem<'a> {
         let mut v = values.to_vec();
         if kind == GenericKind::Quantisation {
             v.resize(3, 0.0);
-            let y = &self.measured[ch];
-            v.push(lattice_step(y).map_or(0.0, |q| lattice_offset(y, q)));
+            v.push(self.lattices[ch].map_or(0.0, |(_, offset)| offset));
         }
         v
     }
@@ -1184,38 +1257,120 @@ impl<'a> Problem<'a> {
         polish: bool,
     ) -> Option<Evaluation> {
         let dims = self.dims(components);
+        // First with every extension parameter at its neutral value (the simpler effect),
+        // then with them free: kept only when that pays for their BIC penalty.
+        let pinned: Vec<Dim> = dims
+            .iter()
+            .map(|d| Dim {
+                pinned: d.neutral.is_some(),
+                ..d.clone()
+            })
+            .collect();
         let mut theta: Vec<f64> = match start {
             Some(s) if s.len() == dims.len() => s.to_vec(),
             _ => dims.iter().map(|d| to_value(d, 0.5)).collect(),
         };
+        let start_theta = theta.clone();
+        resolve_pinned(&pinned, &mut theta);
+        let free = pinned.iter().filter(|d| searched(d)).count();
         // From a start (pairs refined from their singles' fits): one coarser pass.
-        let (passes, grid, golden) = match (dims.len(), start.is_some()) {
+        let (passes, grid, golden) = match (free, start.is_some()) {
             (_, true) => (1, 7, 10),
-            (1, false) => (1, 13, 32),
+            (0 | 1, false) => (1, 13, 32),
             _ => (2, 13, 32),
         };
-        let mut best = self.cost_at(components, &dims, &theta);
-        // From two singles' fits, each of which took the whole gap, the added (second)
-        // member is searched first, with the first held at its fit: forward selection.
-        // Searched first, the first member would fall to whatever the second's fit left.
-        let order: Vec<usize> = if start.is_some() {
-            (0..dims.len()).rev().collect()
-        } else {
-            (0..dims.len()).collect()
-        };
-        for _ in 0..passes {
-            for &i in order.iter().filter(|&&i| dims[i].lo < dims[i].hi) {
-                let (value, cost) = self.line_search(components, &dims, &theta, i, grid, golden);
-                // A tie moves too: on a plateau the line search keeps the value that
-                // changes the model least, which the start need not be.
-                if cost <= best {
-                    best = cost;
-                    theta[i] = value;
+        let mut best = self.cost_at(components, &pinned, &theta);
+        self.coordinate_passes(
+            components,
+            &pinned,
+            &mut theta,
+            &mut best,
+            start.is_some(),
+            (passes, grid, golden),
+        );
+        if polish && free >= 2 && best.is_finite() {
+            (theta, best) = self.polish(components, &pinned, theta, best);
+        }
+        // Extension parameters held at their neutral values (not counted in the penalty).
+        let mut held = 0;
+        if pinned != dims && best.is_finite() {
+            resolve_pinned(&pinned, &mut theta);
+            let mut wide = theta.clone();
+            let mut wide_best = best;
+            if start.is_some() {
+                // A pair starts from its singles' extensions when they fit better.
+                let mut from_start = theta.clone();
+                for ((w, d), s) in from_start.iter_mut().zip(&dims).zip(&start_theta) {
+                    if d.neutral.is_some() {
+                        *w = *s;
+                    }
+                }
+                let cost = self.cost_at(components, &dims, &from_start);
+                if cost < wide_best {
+                    (wide, wide_best) = (from_start, cost);
+                }
+            } else {
+                // An extension can matter only far from the simpler fit (a zeroing deadband
+                // only with a wide zone, which a shifted dead zone cannot fit): the other
+                // parameters are also refitted with it held at its range's ends and middle.
+                for (i, d) in dims.iter().enumerate() {
+                    let Some(Neutral::At(neutral)) = d.neutral else {
+                        continue;
+                    };
+                    for u in [0.0, 0.5, 1.0] {
+                        let v = to_value(d, u);
+                        if v == neutral {
+                            continue;
+                        }
+                        let held: Vec<Dim> = pinned
+                            .iter()
+                            .enumerate()
+                            .map(|(j, p)| match j == i {
+                                true => Dim {
+                                    lo: v,
+                                    hi: v,
+                                    pinned: false,
+                                    ..p.clone()
+                                },
+                                false => p.clone(),
+                            })
+                            .collect();
+                        let mut profile = theta.clone();
+                        profile[i] = v;
+                        let mut cost = self.cost_at(components, &held, &profile);
+                        self.coordinate_passes(
+                            components,
+                            &held,
+                            &mut profile,
+                            &mut cost,
+                            false,
+                            (1, 13, 32),
+                        );
+                        if cost < wide_best {
+                            (wide, wide_best) = (profile, cost);
+                        }
+                    }
                 }
             }
-        }
-        if polish && dims.len() >= 2 && best.is_finite() {
-            (theta, best) = self.polish(components, &dims, theta, best);
+            self.coordinate_passes(
+                components,
+                &dims,
+                &mut wide,
+                &mut wide_best,
+                true,
+                (1, 7, 10),
+            );
+            if polish {
+                (wide, wide_best) = self.polish(components, &dims, wide, wide_best);
+            }
+            let extensions = dims.iter().filter(|d| d.neutral.is_some()).count();
+            let n_train = self.train_chi2(&self.nominal).1.max(2) as f64;
+            // BIC: each parameter costs ln n_train in training cost (squared noise units).
+            if wide_best + extensions as f64 * n_train.ln() < best {
+                (theta, best) = (wide, wide_best);
+            } else {
+                held = extensions;
+            }
         }
         if !best.is_finite() {
             return None;
@@ -1230,7 +1385,7 @@ impl<'a> Problem<'a> {
         let nominal_score = self.held_out_score(&self.nominal, 0, &[]);
         // A spread's noise level is fitted too (see `noise_beside_spread`).
         let spread = sim.variances.iter().filter(|v| v.is_some()).count();
-        let absolute = self.held_out_score(&sim, dims.len() + spread, &predicted);
+        let absolute = self.held_out_score(&sim, dims.len() - held + spread, &predicted);
         let names: Vec<String> = components.iter().map(|c| self.component_name(c)).collect();
         Some(Evaluation {
             effect: names.join("+"),
@@ -1268,6 +1423,39 @@ impl<'a> Problem<'a> {
             channel_rss: self.rss_split(&sim),
             fitted,
         })
+    }
+
+    /// Coordinate line searches over the dims whose range is not a point (`passes`, `grid`
+    /// and `golden` in [`Problem::line_search`]'s sense), moving `theta` where the cost
+    /// does not rise.
+    fn coordinate_passes(
+        &self,
+        components: &[Component],
+        dims: &[Dim],
+        theta: &mut [f64],
+        best: &mut f64,
+        from_start: bool,
+        (passes, grid, golden): (usize, usize, usize),
+    ) {
+        // From two singles' fits, each of which took the whole gap, the added (second)
+        // member is searched first, with the first held at its fit: forward selection.
+        // Searched first, the first member would fall to whatever the second's fit left.
+        let order: Vec<usize> = if from_start {
+            (0..dims.len()).rev().collect()
+        } else {
+            (0..dims.len()).collect()
+        };
+        for _ in 0..passes {
+            for &i in order.iter().filter(|&&i| searched(&dims[i])) {
+                let (value, cost) = self.line_search(components, dims, theta, i, grid, golden);
+                // A tie moves too: on a plateau the line search keeps the value that
+                // changes the model least, which the start need not be.
+                if cost <= *best {
+                    *best = cost;
+                    theta[i] = value;
+                }
+            }
+        }
     }
 
     /// Nelder-Mead on the unit cube from `theta` (cost `best`); returns the better of the two.
@@ -1470,6 +1658,15 @@ fn grid_then_golden(
     if c < best.1 { (u, c) } else { best }
 }
 
+/// Per channel of `measured`, the step ([`lattice_step`]) and offset ([`lattice_offset`])
+/// of the lattice its readings lie on, if they lie on one.
+pub fn channel_lattices(measured: &[Vec<f64>]) -> Vec<Option<(f64, f64)>> {
+    measured
+        .iter()
+        .map(|y| lattice_step(y).map(|q| (q, lattice_offset(y, q))))
+        .collect()
+}
+
 /// The step of the lattice a quantised channel's values lie on: the smallest nonzero
 /// difference between consecutive samples, accepted when at least 90 % of the nonzero
 /// differences are integer multiples of it (to 1e-6) and it is not a float rounding step.
@@ -1625,14 +1822,32 @@ fn to_value(d: &Dim, u: f64) -> f64 {
     }
 }
 
+/// Whether the fit searches `d`: its range is not a point and it is not pinned.
+fn searched(d: &Dim) -> bool {
+    d.lo < d.hi && !d.pinned
+}
+
+/// Sets each pinned dim of `theta` to its neutral value.
+fn resolve_pinned(dims: &[Dim], theta: &mut [f64]) {
+    for i in 0..dims.len().min(theta.len()) {
+        match (dims[i].pinned, dims[i].neutral) {
+            (true, Some(Neutral::At(v))) => theta[i] = v,
+            (true, Some(Neutral::MinusPrevious)) if i > 0 => theta[i] = -theta[i - 1],
+            _ => {}
+        }
+    }
+}
+
 fn assemble(components: &[Component], dims: &[Dim], theta: &[f64]) -> Vec<(Component, Vec<f64>)> {
+    let mut theta = theta.to_vec();
+    resolve_pinned(dims, &mut theta);
     components
         .iter()
         .enumerate()
         .map(|(ci, c)| {
             let values = dims
                 .iter()
-                .zip(theta)
+                .zip(&theta)
                 .filter(|(d, _)| d.component == ci)
                 .map(|(_, v)| *v)
                 .collect();
@@ -1672,8 +1887,19 @@ mod tests {
             -2.5
         );
         assert_eq!(
+            GenericKind::OutputSaturation.apply(&[2.5, -1.0], &y, 1.0),
+            vec![0.0, 1.0, 2.0, 2.5, -1.0]
+        );
+        for k in GenericKind::ALL {
+            assert_eq!(k.param_names().len(), k.neutral_values().len(), "{k:?}");
+        }
+        assert_eq!(
             GenericKind::DeadZone.apply(&[1.5], &y, 1.0),
             vec![0.0, 0.0, 0.5, 1.5, -1.5]
+        );
+        assert_eq!(
+            GenericKind::DeadZone.apply(&[1.5, 0.0], &y, 1.0),
+            vec![0.0, 0.0, 2.0, 3.0, -3.0]
         );
         let lag = GenericKind::FirstOrderLag.apply(&[1.0], &[0.0, 1.0, 1.0], 1.0);
         assert!((lag[1] - (1.0 - (-1.0f64).exp())).abs() < 1e-12);

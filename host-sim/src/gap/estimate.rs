@@ -76,16 +76,7 @@ impl ChannelSensor {
     /// The reading of model output `v` (noise-free).
     pub fn read(&self, v: f64) -> f64 {
         self.maps.iter().fold(v, |y, (kind, values)| {
-            let p = values.first().copied().unwrap_or(0.0);
-            match kind {
-                GenericKind::SensorBias => y + p,
-                GenericKind::SensorScale => y * (1.0 + p),
-                GenericKind::OutputSaturation => y.clamp(-p, p),
-                GenericKind::DeadZone => y.signum() * (y.abs() - p).max(0.0),
-                GenericKind::Quantisation
-                | GenericKind::MeasurementDelay
-                | GenericKind::FirstOrderLag => y,
-            }
+            kind.static_reading(values, y).unwrap_or(y)
         })
     }
 }
