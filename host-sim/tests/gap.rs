@@ -1530,3 +1530,37 @@ fn a_deadband_that_zeroes_small_readings_is_a_dead_zone_with_no_shift() {
     assert!((value(0) / width - 1.0).abs() < 0.02, "{params}");
     assert!(value(1) < 0.05, "{params}");
 }
+
+#[test]
+fn a_clip_after_the_noise_is_found_with_the_noise_measured_off_its_limit() {
+    // The top chamber pressure clipped at 0.7 of its highest reading after the noise: about
+    // two thirds of the readings sit on the limit. Their zero differences put the noise at
+    // 0.4 of its level, and the clip, though fitted to 1e-8 of the limit, failed the
+    // block test (`unknown`).
+    let dir = scratch("clip-after-noise");
+    let mut d = named(
+        generated("valve", &["sensor_bias"], &[2.0], 77, 1),
+        "valve-none-s0",
+    );
+    let unclipped = column_values(&d.csv, "y:pt");
+    let limit = 0.7 * unclipped.iter().copied().fold(f64::MIN, f64::max);
+    d.csv = with_column_read(&d.csv, "y:pt", |v| v.min(limit));
+    let at_limit = column_values(&d.csv, "y:pt")
+        .iter()
+        .filter(|v| **v == limit)
+        .count();
+    assert!(at_limit > unclipped.len() / 3, "{at_limit}");
+    let (_, v) = diagnose(&dir, &d);
+    assert_eq!(v["verdict"], "output_saturation:pt", "{}", v["ranking"][0]);
+    let fitted = v["ranking"][0]["params"][0][1].as_f64().unwrap();
+    assert!((fitted / limit - 1.0).abs() < 1e-6, "{fitted} {limit}");
+    let noise = v["noise"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["channel"] == "y:pt")
+        .unwrap()["std"]
+        .as_f64()
+        .unwrap();
+    assert!(noise > 3000.0, "{noise}");
+}

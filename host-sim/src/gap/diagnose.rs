@@ -5,14 +5,14 @@ use crate::dataio::{Recording, read_recording};
 use crate::error::SimError;
 use crate::gap::analysis::{ALPHA, WhereReport, analyse};
 use crate::gap::effects::{
-    Component, Evaluation, GenericKind, Problem, channel_lattices, flat_values,
+    Component, Evaluation, GenericKind, Problem, channel_lattices, flat_values, lattice_step,
 };
 use crate::gap::meta::{GapMeta, read_gap_meta};
 use crate::gap::plant::{
     BUILTIN_PLANTS, GapPlant, InputTiming, PlantData, Simulation, builtin_plant,
 };
 use crate::gap::start::start_sensitivities;
-use crate::gap::stats::{noise_std_from_differences, second_differences};
+use crate::gap::stats::{noise_std_from_differences, second_differences, without_clipped_extremes};
 use crate::gap::units::{Conversion, conversion};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -408,7 +408,7 @@ fn diagnose_timed(
                 f64::INFINITY,
                 "meta",
             ),
-            None => match noise_std_from_differences(&y) {
+            None => match noise_std_from_differences(&unclipped(&y, lattice_step(&y))) {
                 Some((s, dof)) => match still_lattice_step(&y) {
                     // Noise below the step: over half the second differences are exactly
                     // zero, so the estimate measures the signal's own steps; the error of
@@ -898,6 +898,14 @@ fn refine_noise_from(
         // signal moves slowly its second differences are mostly zero and measure the steps,
         // not the noise. Its readings err by at least their rounding, q / sqrt 12.
         let floor = problem.lattices[c].map_or(0.0, |(q, _)| q / 12f64.sqrt());
+        // Where the readings sit on a clip's limit the residual is the replay's own smooth
+        // curvature, not noise.
+        let clipped = unclipped(&problem.measured[c], problem.lattices[c].map(|(q, _)| q));
+        let residual: Vec<f64> = residual
+            .iter()
+            .zip(&clipped)
+            .map(|(r, y)| if y.is_nan() { f64::NAN } else { *r })
+            .collect();
         if let Some((s, dof)) = noise_std_from_differences(&residual)
             && s.max(floor) < ratio * problem.sigma[c]
         {
@@ -913,6 +921,15 @@ fn refine_noise_from(
         problem.refit_nominal();
     }
     changed
+}
+
+/// The readings `y` with those on a clip's limit set to NaN
+/// ([`without_clipped_extremes`]), unless they lie on a lattice of step `lattice`.
+fn unclipped(y: &[f64], lattice: Option<f64>) -> Vec<f64> {
+    match lattice {
+        Some(_) => y.to_vec(),
+        None => without_clipped_extremes(y),
+    }
 }
 
 /// The candidates (single and pairs) that the held-out data do not separate from the

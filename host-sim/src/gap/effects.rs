@@ -82,7 +82,8 @@ pub enum GenericKind {
     Quantisation,
     /// `y(t) = y_model(t - d)`.
     MeasurementDelay,
-    /// `y = clamp(y_model, l, L)`, `l = -L` unless a lower limit of its own pays.
+    /// `y = clamp(y_model + e, l, L)` on average over sensor noise `e` before the clip;
+    /// `l = -L` and no noise before it unless they pay.
     OutputSaturation,
     /// `y = sign(y_model) max(|y_model| - d, 0)`.
     DeadZone,
@@ -133,8 +134,9 @@ impl GenericKind {
             }
             GenericKind::MeasurementDelay => "`y(t) = y_model(t - delay_s)`",
             GenericKind::OutputSaturation => {
-                "`y = clamp(y_model, lower_limit, limit)`, `lower_limit = -limit` (a symmetric \
-                 range) unless a lower limit of its own pays for its parameter"
+                "`y = clamp(y_model + e, lower_limit, limit)` on average over sensor noise `e` \
+                 (std `noise_std`) before the clip; `lower_limit = -limit` (a symmetric range) \
+                 and `noise_std = 0` unless they pay for their parameters"
             }
             GenericKind::DeadZone => {
                 "`y = 0` where `abs(y_model) < width`, else `y_model - sign(y_model) shift \
@@ -174,7 +176,7 @@ impl GenericKind {
             GenericKind::SensorScale => &["scale_error"],
             GenericKind::Quantisation => &["step", "noise_std", "threshold"],
             GenericKind::MeasurementDelay => &["delay_s"],
-            GenericKind::OutputSaturation => &["limit", "lower_limit"],
+            GenericKind::OutputSaturation => &["limit", "lower_limit", "noise_std"],
             GenericKind::DeadZone => &["width", "shift"],
             GenericKind::FirstOrderLag => &["tau_s"],
         }
@@ -197,7 +199,11 @@ impl GenericKind {
             ],
             GenericKind::MeasurementDelay => vec![(0.0, 25.0 * dt, Scale::Linear)],
             GenericKind::OutputSaturation => {
-                vec![(0.05 * a, a, Scale::Linear), (-a, -0.05 * a, Scale::Linear)]
+                vec![
+                    (0.05 * a, a, Scale::Linear),
+                    (-a, -0.05 * a, Scale::Linear),
+                    (0.0, 1.5 * sigma, Scale::Linear),
+                ]
             }
             // From below the noise: on a precise sensor with a large swing a tenth of a
             // thousandth of the swing is still many noise stds.
@@ -216,7 +222,9 @@ impl GenericKind {
     pub fn neutral_values(self) -> &'static [Option<Neutral>] {
         match self {
             GenericKind::Quantisation => &[None, None, Some(Neutral::At(0.0))],
-            GenericKind::OutputSaturation => &[None, Some(Neutral::MinusPrevious)],
+            GenericKind::OutputSaturation => {
+                &[None, Some(Neutral::MinusPrevious), Some(Neutral::At(0.0))]
+            }
             GenericKind::DeadZone => &[None, Some(Neutral::At(1.0))],
             _ => &[None],
         }
@@ -230,9 +238,12 @@ impl GenericKind {
         match self {
             GenericKind::SensorBias => Some(v + p),
             GenericKind::SensorScale => Some(v * (1.0 + p)),
-            GenericKind::OutputSaturation => {
-                Some(v.max(params.get(1).copied().unwrap_or(-p)).min(p))
-            }
+            GenericKind::OutputSaturation => Some(clipped_mean(
+                v,
+                params.get(1).copied().unwrap_or(-p),
+                p,
+                params.get(2).copied().unwrap_or(0.0),
+            )),
             GenericKind::DeadZone => {
                 let shift = params.get(1).copied().unwrap_or(1.0);
                 Some(if v.abs() < p {
@@ -301,6 +312,24 @@ pub enum Neutral {
     At(f64),
     /// At minus the parameter before it (a clip's lower limit: a symmetric range).
     MinusPrevious,
+}
+
+/// Mean reading of a sensor clipped to `[lo, hi]` whose input is `v` plus Gaussian noise of
+/// std `s` (a censored Gaussian's mean): near a limit the clip cuts the noise on one side,
+/// so the mean reading falls short of `clamp(v, lo, hi)` by up to `0.4 s`.
+pub fn clipped_mean(v: f64, lo: f64, hi: f64, s: f64) -> f64 {
+    if !(s > 0.0 && lo < hi) {
+        return v.max(lo).min(hi);
+    }
+    let cdf = |x: f64| 0.5 * libm::erfc(-x / std::f64::consts::SQRT_2);
+    let pdf = |x: f64| (-0.5 * x * x).exp() / (std::f64::consts::TAU).sqrt();
+    let (a, b) = ((lo - v) / s, (hi - v) / s);
+    let mean = lo * cdf(a) + hi * (1.0 - cdf(b)) + v * (cdf(b) - cdf(a)) + s * (pdf(a) - pdf(b));
+    if mean.is_finite() {
+        mean
+    } else {
+        v.max(lo).min(hi)
+    }
 }
 
 /// What a quantiser with `params` (step, noise, threshold, lattice offset) subtracts from its
@@ -1364,10 +1393,15 @@ impl<'a> Problem<'a> {
                 (wide, wide_best) = self.polish(components, &dims, wide, wide_best);
             }
             let extensions = dims.iter().filter(|d| d.neutral.is_some()).count();
+            // Only the extensions the freed fit moved off their neutral values count.
+            let mut neutral = wide.clone();
+            resolve_pinned(&pinned, &mut neutral);
+            let moved = wide.iter().zip(&neutral).filter(|(w, n)| w != n).count();
             let n_train = self.train_chi2(&self.nominal).1.max(2) as f64;
             // BIC: each parameter costs ln n_train in training cost (squared noise units).
-            if wide_best + extensions as f64 * n_train.ln() < best {
+            if moved > 0 && wide_best + moved as f64 * n_train.ln() < best {
                 (theta, best) = (wide, wide_best);
+                held = extensions - moved;
             } else {
                 held = extensions;
             }
@@ -1890,6 +1924,11 @@ mod tests {
             GenericKind::OutputSaturation.apply(&[2.5, -1.0], &y, 1.0),
             vec![0.0, 1.0, 2.0, 2.5, -1.0]
         );
+        // At a limit the clip halves the noise: the mean reading is s / sqrt(2 pi) short.
+        let at_limit = GenericKind::OutputSaturation.apply(&[2.5, -2.5, 0.1], &[2.5], 1.0)[0];
+        assert!((at_limit - (2.5 - 0.1 / std::f64::consts::TAU.sqrt())).abs() < 1e-12);
+        let inside = GenericKind::OutputSaturation.apply(&[2.5, -2.5, 0.1], &[0.3], 1.0)[0];
+        assert!((inside - 0.3).abs() < 1e-12);
         for k in GenericKind::ALL {
             assert_eq!(k.param_names().len(), k.neutral_values().len(), "{k:?}");
         }
