@@ -1532,6 +1532,30 @@ fn a_deadband_that_zeroes_small_readings_is_a_dead_zone_with_no_shift() {
 }
 
 #[test]
+fn a_deadband_on_the_noisy_readings_is_a_dead_zone_with_the_noise_measured_off_its_zeros() {
+    // The same cutoff applied to the noisy reading: inside the zone the sensor reads exactly
+    // 0, so a third of the record has zero differences and the noise estimate fell to a
+    // fraction of the noise; the dead zone was then `unknown`.
+    let dir = scratch("deadband-after-noise");
+    let mut d = named(
+        generated("dc_motor", &["sensor_bias"], &[2.0], 11, 1),
+        "dc_motor-none-s0",
+    );
+    let speed = column_values(&d.csv, "y:speed");
+    let width = 0.15 * speed.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    let zeroed = speed.iter().filter(|v| v.abs() < width).count();
+    assert!(zeroed > 50, "{zeroed}");
+    d.csv = with_column_read(&d.csv, "y:speed", |v| if v.abs() < width { 0.0 } else { v });
+    let (_, v) = diagnose(&dir, &d);
+    assert_eq!(v["verdict"], "dead_zone:speed", "{}", v["ranking"][0]);
+    let params = &v["ranking"][0]["params"];
+    let value = |i: usize| params[i][1].as_f64().unwrap();
+    assert!((value(0) / width - 1.0).abs() < 0.02, "{params}");
+    assert!(value(1) < 0.05, "{params}");
+    assert!(v["ranking"][0]["shrink"].as_f64().unwrap() > 0.9);
+}
+
+#[test]
 fn a_clip_after_the_noise_is_found_with_the_noise_measured_off_its_limit() {
     // The top chamber pressure clipped at 0.7 of its highest reading after the noise: about
     // two thirds of the readings sit on the limit. Their zero differences put the noise at

@@ -12,7 +12,7 @@ use crate::gap::plant::{
     BUILTIN_PLANTS, GapPlant, InputTiming, PlantData, Simulation, builtin_plant,
 };
 use crate::gap::start::start_sensitivities;
-use crate::gap::stats::{noise_std_from_differences, second_differences, without_clipped_extremes};
+use crate::gap::stats::{noise_std_from_differences, second_differences, without_repeated_levels};
 use crate::gap::units::{Conversion, conversion};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -408,7 +408,7 @@ fn diagnose_timed(
                 f64::INFINITY,
                 "meta",
             ),
-            None => match noise_std_from_differences(&unclipped(&y, lattice_step(&y))) {
+            None => match noise_std_from_differences(&unclipped(&y, lattice_step(&y).is_some())) {
                 Some((s, dof)) => match still_lattice_step(&y) {
                     // Noise below the step: over half the second differences are exactly
                     // zero, so the estimate measures the signal's own steps; the error of
@@ -900,10 +900,10 @@ fn refine_noise_from(
         let floor = problem.lattices[c].map_or(0.0, |(q, _)| q / 12f64.sqrt());
         // Where the readings sit on a clip's limit the residual is the replay's own smooth
         // curvature, not noise.
-        let clipped = unclipped(&problem.measured[c], problem.lattices[c].map(|(q, _)| q));
+        let off_limits = unclipped(&problem.measured[c], problem.lattices[c].is_some());
         let residual: Vec<f64> = residual
             .iter()
-            .zip(&clipped)
+            .zip(&off_limits)
             .map(|(r, y)| if y.is_nan() { f64::NAN } else { *r })
             .collect();
         if let Some((s, dof)) = noise_std_from_differences(&residual)
@@ -923,12 +923,13 @@ fn refine_noise_from(
     changed
 }
 
-/// The readings `y` with those on a clip's limit set to NaN
-/// ([`without_clipped_extremes`]), unless they lie on a lattice of step `lattice`.
-fn unclipped(y: &[f64], lattice: Option<f64>) -> Vec<f64> {
-    match lattice {
-        Some(_) => y.to_vec(),
-        None => without_clipped_extremes(y),
+/// The readings `y` with those on a repeated level (a clip's limit) set to NaN
+/// ([`without_repeated_levels`]), unless they lie `on_lattice` (where every value repeats).
+fn unclipped(y: &[f64], on_lattice: bool) -> Vec<f64> {
+    if on_lattice {
+        y.to_vec()
+    } else {
+        without_repeated_levels(y)
     }
 }
 

@@ -19,10 +19,37 @@ use argmin::solver::neldermead::NelderMead;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
-/// A fitted quantiser on one channel: its `(step, noise before it)` and its input, the
-/// candidate's replay of that channel without the quantiser, shifted so that the quantiser
-/// rounds it to the nearest multiple of the step (see [`GenericKind::Quantisation`]).
-pub type QuantiserReplay = ((f64, f64), Vec<f64>);
+/// A fitted sensor on one channel whose reading scatters around its mean by more than the
+/// noise in places (a quantiser near a threshold, a dead zone with noise before it near its
+/// edge), with its input: the candidate's replay of that channel without it.
+pub struct NoisySensorReplay {
+    sensor: NoisySensor,
+    input: Vec<f64>,
+}
+
+/// The sensors of [`NoisySensorReplay`] with the parameters their reading variance needs.
+enum NoisySensor {
+    /// Step and noise before it; the input is shifted so that it rounds to the nearest
+    /// multiple of the step (see [`GenericKind::Quantisation`]).
+    Quantiser { step: f64, noise: f64 },
+    /// Width, shift and noise before it (see [`GenericKind::DeadZone`]).
+    DeadZone { width: f64, shift: f64, noise: f64 },
+}
+
+impl NoisySensorReplay {
+    /// The reading's variance at sample `k` ([`quantised_variance`], [`dead_zone_moments`]).
+    pub fn variance(&self, k: usize) -> f64 {
+        let v = self.input.get(k).copied().unwrap_or(f64::NAN);
+        match self.sensor {
+            NoisySensor::Quantiser { step, noise } => quantised_variance(v, step, noise),
+            NoisySensor::DeadZone {
+                width,
+                shift,
+                noise,
+            } => dead_zone_moments(v, width, shift, noise).1,
+        }
+    }
+}
 
 /// Samples per window of [`innovation_means_p`]: 5 s at the wheel's 20 Hz, long against
 /// the ripple's swing (far above the sample rate, aliased anywhere) and short against the
@@ -139,10 +166,11 @@ impl GenericKind {
                  and `noise_std = 0` unless they pay for their parameters"
             }
             GenericKind::DeadZone => {
-                "`y = 0` where `abs(y_model) < width`, else `y_model - sign(y_model) shift \
-                 width`; `shift = 1` (the shifted dead zone `sign(y_model) max(abs(y_model) - \
-                 width, 0)`) unless another shift pays for its parameter (0: readings zeroed \
-                 below `width`, as a low-flow cutoff)"
+                "`y = 0` where `abs(z) < width`, else `z - sign(z) shift width`, with `z = \
+                 y_model + e`, on average over sensor noise `e` (std `noise_std`) before the \
+                 zone; `shift = 1` (the shifted dead zone `sign(y_model) max(abs(y_model) - \
+                 width, 0)`) and `noise_std = 0` unless they pay for their parameters \
+                 (`shift = 0`: readings zeroed below `width`, as a low-flow cutoff)"
             }
             GenericKind::FirstOrderLag => "first-order sensor lag, time constant `tau_s`",
         }
@@ -177,7 +205,7 @@ impl GenericKind {
             GenericKind::Quantisation => &["step", "noise_std", "threshold"],
             GenericKind::MeasurementDelay => &["delay_s"],
             GenericKind::OutputSaturation => &["limit", "lower_limit", "noise_std"],
-            GenericKind::DeadZone => &["width", "shift"],
+            GenericKind::DeadZone => &["width", "shift", "noise_std"],
             GenericKind::FirstOrderLag => &["tau_s"],
         }
     }
@@ -210,6 +238,7 @@ impl GenericKind {
             GenericKind::DeadZone => vec![
                 ((1e-4 * a).min(0.1 * sigma), 0.5 * a, Scale::Log),
                 (0.0, 1.0, Scale::Linear),
+                (0.0, 1.5 * sigma, Scale::Linear),
             ],
             GenericKind::FirstOrderLag => vec![(0.1 * dt, 200.0 * dt, Scale::Log)],
         }
@@ -225,7 +254,7 @@ impl GenericKind {
             GenericKind::OutputSaturation => {
                 &[None, Some(Neutral::MinusPrevious), Some(Neutral::At(0.0))]
             }
-            GenericKind::DeadZone => &[None, Some(Neutral::At(1.0))],
+            GenericKind::DeadZone => &[None, Some(Neutral::At(1.0)), Some(Neutral::At(0.0))],
             _ => &[None],
         }
     }
@@ -244,14 +273,15 @@ impl GenericKind {
                 p,
                 params.get(2).copied().unwrap_or(0.0),
             )),
-            GenericKind::DeadZone => {
-                let shift = params.get(1).copied().unwrap_or(1.0);
-                Some(if v.abs() < p {
-                    0.0
-                } else {
-                    v - v.signum() * shift * p
-                })
-            }
+            GenericKind::DeadZone => Some(
+                dead_zone_moments(
+                    v,
+                    p,
+                    params.get(1).copied().unwrap_or(1.0),
+                    params.get(2).copied().unwrap_or(0.0),
+                )
+                .0,
+            ),
             GenericKind::Quantisation
             | GenericKind::MeasurementDelay
             | GenericKind::FirstOrderLag => None,
@@ -329,6 +359,64 @@ pub fn clipped_mean(v: f64, lo: f64, hi: f64, s: f64) -> f64 {
         mean
     } else {
         v.max(lo).min(hi)
+    }
+}
+
+/// Mean and variance of the reading of a dead zone of `width` and `shift` (see
+/// [`GenericKind::DeadZone`]) whose input is `v` plus Gaussian noise of std `s`: a mixture
+/// of the zone's zero and the two truncated Gaussian tails beyond it, each shifted by
+/// `shift width` towards zero. Near an edge the reading is zero or about the edge at random,
+/// a variance of up to a quarter of the edge squared, which no mean prediction removes.
+pub fn dead_zone_moments(v: f64, width: f64, shift: f64, s: f64) -> (f64, f64) {
+    let exact = || {
+        let mean = if v.abs() < width {
+            0.0
+        } else {
+            v - v.signum() * shift * width
+        };
+        (mean, 0.0)
+    };
+    if !(s > 0.0 && width > 0.0 && v.is_finite()) {
+        return exact();
+    }
+    let tail = |x: f64| 0.5 * libm::erfc(x / std::f64::consts::SQRT_2);
+    let pdf = |x: f64| (-0.5 * x * x).exp() / (std::f64::consts::TAU).sqrt();
+    let c = shift * width;
+    // Per branch: probability, conditional mean and variance of the reading.
+    let mut branches = [(0.0, 0.0, 0.0); 3];
+    for (i, (a, sign)) in [((width - v) / s, 1.0), ((width + v) / s, -1.0)]
+        .into_iter()
+        .enumerate()
+    {
+        let p = tail(a);
+        let lambda = pdf(a) / p;
+        if p > 0.0 && lambda.is_finite() {
+            // `z` beyond the edge at `sign width`: a Gaussian truncated at standardised `a`.
+            let mean = v + sign * (s * lambda - c);
+            let var = (s * s * (1.0 + a * lambda - lambda * lambda)).max(0.0);
+            branches[i] = (p, mean, var);
+        }
+    }
+    branches[2].0 = (1.0 - branches[0].0 - branches[1].0).max(0.0);
+    let mean: f64 = branches.iter().map(|(p, m, _)| p * m).sum();
+    let var: f64 = branches
+        .iter()
+        .map(|(p, m, w)| p * (w + (m - mean).powi(2)))
+        .sum();
+    if mean.is_finite() && var.is_finite() {
+        (mean, var)
+    } else {
+        exact()
+    }
+}
+
+/// Whether a fitted component at `values` is a [`NoisySensorReplay`]'s sensor: a quantiser,
+/// or a dead zone with noise before it.
+fn is_noisy_sensor(component: &Component, values: &[f64]) -> bool {
+    match component {
+        Component::Generic(GenericKind::Quantisation, _) => true,
+        Component::Generic(GenericKind::DeadZone, _) => values.get(2).is_some_and(|s| *s > 0.0),
+        _ => false,
     }
 }
 
@@ -671,30 +759,47 @@ impl<'a> Problem<'a> {
     /// sensitivity, see [`refit_start`]): the first measurement carries noise and, under a
     /// sensor effect (bias, scale, saturation, ...), the effect itself, which a slow plant
     /// would carry through the whole record.
-    /// A quantiser is applied after the refit: through its staircase one Gauss-Newton step
-    /// lands anywhere, and its rounding averages out of the fit without it (all but its
-    /// thresholds' offset, a bias of `-threshold step`, which the refit sees).
+    /// A quantiser, and a dead zone that jumps at its edge (`shift < 1`), are applied after
+    /// the refit: through a staircase or a jump one Gauss-Newton step lands anywhere (a
+    /// record that starts inside a zeroing deadband moved its start by the whole zone).
+    /// A quantiser's rounding averages out of the fit without it (all but its thresholds'
+    /// offset, a bias of `-threshold step`, which the refit sees); readings inside a dead
+    /// zone are left out of the fit.
     fn with_refitted_start(&self, raw: Simulation, fitted: &[(Component, Vec<f64>)]) -> Simulation {
-        let (quantisers, others): (Vec<_>, Vec<_>) = fitted
-            .iter()
-            .cloned()
-            .partition(|(c, _)| matches!(c, Component::Generic(GenericKind::Quantisation, _)));
+        let (after_refit, others): (Vec<_>, Vec<_>) = fitted.iter().cloned().partition(|(c, v)| {
+            matches!(c, Component::Generic(GenericKind::Quantisation, _))
+                || matches!(c, Component::Generic(GenericKind::DeadZone, _))
+                    && v.get(1).is_some_and(|shift| *shift < 1.0)
+        });
         // What a quantiser's rounding leaves on average is its thresholds' offset: the
         // refit sees it as a bias, which comes off again before the quantiser acts.
-        let offsets: Vec<(usize, f64)> = quantisers
+        let offsets: Vec<(usize, f64)> = after_refit
             .iter()
             .filter_map(|(c, v)| match c {
-                Component::Generic(_, ch) => Some((
+                Component::Generic(GenericKind::Quantisation, ch) => Some((
                     *ch,
                     v.get(2).copied().unwrap_or(0.0) * v.first().copied().unwrap_or(0.0),
                 )),
-                Component::Plant(_) => None,
+                _ => None,
             })
             .collect();
+        // Readings inside a dead zone applied after the refit say nothing about the start
+        // the refit can see.
+        let mut zoned = std::borrow::Cow::Borrowed(&self.measured);
+        for (c, v) in &after_refit {
+            if let Component::Generic(GenericKind::DeadZone, ch) = c {
+                let width = v.first().copied().unwrap_or(0.0);
+                for y in zoned.to_mut()[*ch].iter_mut() {
+                    if y.abs() < width {
+                        *y = f64::NAN;
+                    }
+                }
+            }
+        }
         let mut outputs = refit_start(
             &raw.outputs,
             &self.init_sensitivity,
-            &self.measured,
+            &zoned,
             &self.sigma,
             |k| self.train[k],
             |outputs| {
@@ -709,7 +814,7 @@ impl<'a> Problem<'a> {
             outputs[ch].iter_mut().for_each(|v| *v += offset);
         }
         Simulation {
-            outputs: self.apply_generic(outputs, &quantisers),
+            outputs: self.apply_generic(outputs, &after_refit),
             states: raw.states,
             variances: raw.variances,
             innovations: raw.innovations,
@@ -915,27 +1020,27 @@ impl<'a> Problem<'a> {
             .sqrt()
     }
 
-    /// [`Problem::gap`] of a candidate's replay `sim`, where a quantiser among its
-    /// components `fitted` also predicts the reading's variance: the residual of its channel
-    /// is measured against the larger of the noise and that variance (a coarse quantiser
-    /// near a threshold reads a whole step off at random, which no mean prediction removes
-    /// and which is the noise of a quantised sensor, not a gap).
-    /// `quantisers` is [`Problem::quantisers`] of those components.
-    pub fn gap_of(&self, sim: &Simulation, quantisers: &[Option<QuantiserReplay>]) -> f64 {
+    /// [`Problem::gap`] of a candidate's replay `sim`, where a noisy sensor among its
+    /// components also predicts the reading's variance: the residual of its channel is
+    /// measured against the larger of the noise and that variance (a coarse quantiser near a
+    /// threshold reads a whole step off at random, which no mean prediction removes and
+    /// which is the noise of a quantised sensor, not a gap).
+    /// `sensors` is [`Problem::noisy_sensors`] of those components.
+    pub fn gap_of(&self, sim: &Simulation, sensors: &[Option<NoisySensorReplay>]) -> f64 {
         let mut total = 0.0;
         for (c, (y, m)) in self.measured.iter().zip(&sim.outputs).enumerate() {
             let s2 = self
                 .noise_beside_spread(sim, c)
                 .unwrap_or(self.sigma[c] * self.sigma[c]);
-            let quantiser = quantisers.get(c).and_then(Option::as_ref);
+            let sensor = sensors.get(c).and_then(Option::as_ref);
             let added = added_variance(sim, c);
             let (mut acc, mut n) = (0.0, 0usize);
             for k in 0..y.len() {
                 if !(self.test[k] && y[k].is_finite()) {
                     continue;
                 }
-                let var = match quantiser {
-                    Some(((q, s), input)) => s2.max(quantised_variance(input[k], *q, *s)),
+                let var = match sensor {
+                    Some(sensor) => s2.max(sensor.variance(k)),
                     None => s2,
                 } + added.map_or(0.0, |a| a[k]);
                 let r = y[k] - m[k];
@@ -953,9 +1058,9 @@ impl<'a> Problem<'a> {
 
     /// Whether the residual `sim` leaves is noise block by block: for every contiguous
     /// held-out block and channel, the p-value that its mean squared standardised residual
-    /// exceeds 1 (against the quantiser's predicted variance where one is fitted, as in
+    /// exceeds 1 (against a noisy sensor's predicted variance where one is fitted, as in
     /// [`Problem::gap_of`]); returns the smallest, Holm-adjusted over all of them.
-    pub fn worst_block_p(&self, sim: &Simulation, quantisers: &[Option<QuantiserReplay>]) -> f64 {
+    pub fn worst_block_p(&self, sim: &Simulation, sensors: &[Option<NoisySensorReplay>]) -> f64 {
         let mut blocks: Vec<(usize, usize)> = Vec::new();
         for (k, &held) in self.test.iter().enumerate() {
             match blocks.last_mut() {
@@ -969,7 +1074,7 @@ impl<'a> Problem<'a> {
             let s2 = self
                 .noise_beside_spread(sim, c)
                 .unwrap_or(self.sigma[c] * self.sigma[c]);
-            let quantiser = quantisers.get(c).and_then(Option::as_ref);
+            let sensor = sensors.get(c).and_then(Option::as_ref);
             let added = added_variance(sim, c);
             for &(a, b) in &blocks {
                 let (mut acc, mut n) = (0.0, 0usize);
@@ -978,8 +1083,8 @@ impl<'a> Problem<'a> {
                     if !r.is_finite() {
                         continue;
                     }
-                    let var = match quantiser {
-                        Some(((q, s), input)) => s2.max(quantised_variance(input[k], *q, *s)),
+                    let var = match sensor {
+                        Some(sensor) => s2.max(sensor.variance(k)),
                         None => s2,
                     } + added.map_or(0.0, |a| a[k]);
                     acc += r * r / var;
@@ -1137,51 +1242,78 @@ impl<'a> Problem<'a> {
         Some(best.exp())
     }
 
-    /// Per channel, the quantiser among `fitted` on it, if any (see [`QuantiserReplay`]).
-    pub fn quantisers(&self, fitted: &[(Component, Vec<f64>)]) -> Vec<Option<QuantiserReplay>> {
+    /// Per channel, the noisy sensor among `fitted` on it, if any: a quantiser, or a dead
+    /// zone with noise before it (see [`NoisySensorReplay`]).
+    pub fn noisy_sensors(
+        &self,
+        fitted: &[(Component, Vec<f64>)],
+    ) -> Vec<Option<NoisySensorReplay>> {
         (0..self.measured.len())
-            .map(|c| self.quantiser_on(fitted, c))
+            .map(|c| self.noisy_sensor_on(fitted, c))
             .collect()
     }
 
-    fn quantiser_on(&self, fitted: &[(Component, Vec<f64>)], c: usize) -> Option<QuantiserReplay> {
-        let on_c = |comp: &Component| matches!(comp, Component::Generic(GenericKind::Quantisation, ch) if *ch == c);
-        let (_, v) = fitted.iter().find(|(comp, _)| on_c(comp))?;
-        let v = self.with_lattice(GenericKind::Quantisation, c, v);
-        let parameters = (v[0], v[1]);
-        let shift = quantiser_shift(&v);
+    fn noisy_sensor_on(
+        &self,
+        fitted: &[(Component, Vec<f64>)],
+        c: usize,
+    ) -> Option<NoisySensorReplay> {
+        let at = fitted.iter().position(|(comp, v)| {
+            matches!(comp, Component::Generic(_, ch) if *ch == c) && is_noisy_sensor(comp, v)
+        })?;
+        let (Component::Generic(kind, _), v) = &fitted[at] else {
+            return None;
+        };
+        let v = self.with_lattice(*kind, c, v);
+        let (sensor, shift) = match kind {
+            GenericKind::Quantisation => (
+                NoisySensor::Quantiser {
+                    step: v[0],
+                    noise: v[1],
+                },
+                quantiser_shift(&v),
+            ),
+            _ => (
+                NoisySensor::DeadZone {
+                    width: v[0],
+                    shift: v.get(1).copied().unwrap_or(1.0),
+                    noise: v.get(2).copied().unwrap_or(0.0),
+                },
+                0.0,
+            ),
+        };
         let others: Vec<(Component, Vec<f64>)> = fitted
             .iter()
-            .filter(|(comp, _)| !on_c(comp))
-            .cloned()
+            .enumerate()
+            .filter(|(i, _)| *i != at)
+            .map(|(_, f)| f.clone())
             .collect();
         let sim = self.predict(&others).ok()?;
-        Some((
-            parameters,
-            sim.outputs.get(c)?.iter().map(|v| v - shift).collect(),
-        ))
+        Some(NoisySensorReplay {
+            sensor,
+            input: sim.outputs.get(c)?.iter().map(|v| v - shift).collect(),
+        })
     }
 
-    /// Per channel, the reading variance per sample that a quantiser among `fitted`
-    /// predicts ([`quantised_variance`] of its input, floored at half the noise variance):
-    /// between thresholds the reading is certain, on one it is a coin flip between two
-    /// steps, so one variance for the channel misjudges both (`None` without a quantiser).
-    /// `quantisers` is [`Problem::quantisers`] of the candidate's components.
+    /// Per channel, the reading variance per sample that a noisy sensor among `fitted`
+    /// predicts ([`NoisySensorReplay::variance`], floored at half the noise variance):
+    /// between a quantiser's thresholds the reading is certain, on one it is a coin flip
+    /// between two steps, so one variance for the channel misjudges both (`None` without
+    /// such a sensor). `sensors` is [`Problem::noisy_sensors`] of the candidate's components.
     /// A replay that adds a spread of its own ([`Simulation::variances`]) adds it to the
     /// sensor noise's variance on its channel.
     pub fn predicted_variances(
         &self,
-        quantisers: &[Option<QuantiserReplay>],
+        sensors: &[Option<NoisySensorReplay>],
         sim: &Simulation,
     ) -> Vec<Option<Vec<f64>>> {
         (0..self.measured.len())
             .map(|c| {
                 let s2 = self.sigma[c] * self.sigma[c];
                 let added = added_variance(sim, c);
-                let base: Vec<f64> = match quantisers.get(c).and_then(Option::as_ref) {
-                    Some(((q, s), input)) => input
-                        .iter()
-                        .map(|v| quantised_variance(*v, *q, *s).max(0.5 * s2))
+                let base: Vec<f64> = match sensors.get(c).and_then(Option::as_ref) {
+                    Some(sensor) => (0..sensor.input.len())
+                        .map(|k| sensor.variance(k).max(0.5 * s2))
                         .collect(),
                     None => vec![self.noise_beside_spread(sim, c)?; added?.len()],
                 };
@@ -1228,11 +1360,9 @@ impl<'a> Problem<'a> {
         let Ok(sim) = self.predict(&fitted) else {
             return f64::INFINITY;
         };
-        let quantised = components
-            .iter()
-            .any(|c| matches!(c, Component::Generic(GenericKind::Quantisation, _)));
+        let noisy = fitted.iter().any(|(c, v)| is_noisy_sensor(c, v));
         let spread = sim.variances.iter().any(Option::is_some);
-        let c = if quantised || spread {
+        let c = if noisy || spread {
             self.likelihood_train_cost(&sim, &fitted)
         } else {
             self.train_cost(&sim)
@@ -1246,7 +1376,7 @@ impl<'a> Problem<'a> {
     /// fitted with a noise that smooths its mean, which the likelihood then rejects, and a
     /// spread (which leaves the mean alone) is not fitted at all.
     fn likelihood_train_cost(&self, sim: &Simulation, fitted: &[(Component, Vec<f64>)]) -> f64 {
-        let predicted = self.predicted_variances(&self.quantisers(fitted), sim);
+        let predicted = self.predicted_variances(&self.noisy_sensors(fitted), sim);
         let train = self.channel_rss(sim, &self.train);
         let mut cost = 0.0;
         for (c, ((rss, _), s)) in train.iter().zip(&self.sigma).enumerate() {
@@ -1321,78 +1451,17 @@ impl<'a> Problem<'a> {
             (theta, best) = self.polish(components, &pinned, theta, best);
         }
         // Extension parameters held at their neutral values (not counted in the penalty).
-        let mut held = 0;
+        let mut held = dims.iter().filter(|d| d.neutral.is_some()).count();
         if pinned != dims && best.is_finite() {
             resolve_pinned(&pinned, &mut theta);
-            let mut wide = theta.clone();
-            let mut wide_best = best;
-            if start.is_some() {
-                // A pair starts from its singles' extensions when they fit better.
-                let mut from_start = theta.clone();
-                for ((w, d), s) in from_start.iter_mut().zip(&dims).zip(&start_theta) {
-                    if d.neutral.is_some() {
-                        *w = *s;
-                    }
-                }
-                let cost = self.cost_at(components, &dims, &from_start);
-                if cost < wide_best {
-                    (wide, wide_best) = (from_start, cost);
-                }
-            } else {
-                // An extension can matter only far from the simpler fit (a zeroing deadband
-                // only with a wide zone, which a shifted dead zone cannot fit): the other
-                // parameters are also refitted with it held at its range's ends and middle.
-                for (i, d) in dims.iter().enumerate() {
-                    let Some(Neutral::At(neutral)) = d.neutral else {
-                        continue;
-                    };
-                    for u in [0.0, 0.5, 1.0] {
-                        let v = to_value(d, u);
-                        if v == neutral {
-                            continue;
-                        }
-                        let held: Vec<Dim> = pinned
-                            .iter()
-                            .enumerate()
-                            .map(|(j, p)| match j == i {
-                                true => Dim {
-                                    lo: v,
-                                    hi: v,
-                                    pinned: false,
-                                    ..p.clone()
-                                },
-                                false => p.clone(),
-                            })
-                            .collect();
-                        let mut profile = theta.clone();
-                        profile[i] = v;
-                        let mut cost = self.cost_at(components, &held, &profile);
-                        self.coordinate_passes(
-                            components,
-                            &held,
-                            &mut profile,
-                            &mut cost,
-                            false,
-                            (1, 13, 32),
-                        );
-                        if cost < wide_best {
-                            (wide, wide_best) = (profile, cost);
-                        }
-                    }
-                }
-            }
-            self.coordinate_passes(
+            let from_start = start.is_some().then_some(start_theta.as_slice());
+            let (wide, wide_best) = self.free_extensions(
                 components,
-                &dims,
-                &mut wide,
-                &mut wide_best,
-                true,
-                (1, 7, 10),
+                (&dims, &pinned),
+                (&theta, best),
+                from_start,
+                polish,
             );
-            if polish {
-                (wide, wide_best) = self.polish(components, &dims, wide, wide_best);
-            }
-            let extensions = dims.iter().filter(|d| d.neutral.is_some()).count();
             // Only the extensions the freed fit moved off their neutral values count.
             let mut neutral = wide.clone();
             resolve_pinned(&pinned, &mut neutral);
@@ -1401,9 +1470,7 @@ impl<'a> Problem<'a> {
             // BIC: each parameter costs ln n_train in training cost (squared noise units).
             if moved > 0 && wide_best + moved as f64 * n_train.ln() < best {
                 (theta, best) = (wide, wide_best);
-                held = extensions - moved;
-            } else {
-                held = extensions;
+                held -= moved;
             }
         }
         if !best.is_finite() {
@@ -1412,10 +1479,10 @@ impl<'a> Problem<'a> {
         let fitted = assemble(components, &dims, &theta);
         let sim = self.predict(&fitted).ok()?;
         let before = self.gap(&self.nominal);
-        // One replay without each quantiser, shared by the gap and the score.
-        let quantisers = self.quantisers(&fitted);
-        let after = self.gap_of(&sim, &quantisers);
-        let predicted = self.predicted_variances(&quantisers, &sim);
+        // One replay without each noisy sensor, shared by the gap and the score.
+        let sensors = self.noisy_sensors(&fitted);
+        let after = self.gap_of(&sim, &sensors);
+        let predicted = self.predicted_variances(&sensors, &sim);
         let nominal_score = self.held_out_score(&self.nominal, 0, &[]);
         // A spread's noise level is fitted too (see `noise_beside_spread`).
         let spread = sim.variances.iter().filter(|v| v.is_some()).count();
@@ -1449,7 +1516,7 @@ impl<'a> Problem<'a> {
             replay_error_after: self.truth_error(&sim),
             estimation_error_before: None,
             estimation_error_after: None,
-            worst_block_p: self.worst_block_p(&sim, &quantisers),
+            worst_block_p: self.worst_block_p(&sim, &sensors),
             innovations: sim.innovations,
             train_cost: best,
             absolute_score: absolute,
@@ -1457,6 +1524,90 @@ impl<'a> Problem<'a> {
             channel_rss: self.rss_split(&sim),
             fitted,
         })
+    }
+
+    /// The fit with the extension parameters free, from `theta` (the fit with them held at
+    /// neutral under `pinned`, of training cost `best`), returned with its training cost. A pair (`start` given)
+    /// also tries its singles' extensions; a single also refits its other parameters with
+    /// each extension held at its range's ends and middle, since an extension can matter
+    /// only far from the simpler fit (a zeroing deadband only with a wide zone, which a
+    /// shifted dead zone cannot fit).
+    fn free_extensions(
+        &self,
+        components: &[Component],
+        (dims, pinned): (&[Dim], &[Dim]),
+        (theta, best): (&[f64], f64),
+        start: Option<&[f64]>,
+        polish: bool,
+    ) -> (Vec<f64>, f64) {
+        let mut wide = theta.to_vec();
+        let mut wide_best = best;
+        if let Some(start) = start {
+            let mut from_start = theta.to_vec();
+            for ((w, d), s) in from_start.iter_mut().zip(dims).zip(start) {
+                if d.neutral.is_some() {
+                    *w = *s;
+                }
+            }
+            let cost = self.cost_at(components, dims, &from_start);
+            if cost < wide_best {
+                (wide, wide_best) = (from_start, cost);
+            }
+        } else {
+            for (i, d) in dims.iter().enumerate() {
+                let Some(Neutral::At(neutral)) = d.neutral else {
+                    continue;
+                };
+                for u in [0.0, 0.5, 1.0] {
+                    let v = to_value(d, u);
+                    if v == neutral {
+                        continue;
+                    }
+                    let profile_dims: Vec<Dim> = pinned
+                        .iter()
+                        .enumerate()
+                        .map(|(j, p)| {
+                            if j == i {
+                                Dim {
+                                    lo: v,
+                                    hi: v,
+                                    pinned: false,
+                                    ..p.clone()
+                                }
+                            } else {
+                                p.clone()
+                            }
+                        })
+                        .collect();
+                    let mut profile = theta.to_vec();
+                    profile[i] = v;
+                    let mut cost = self.cost_at(components, &profile_dims, &profile);
+                    self.coordinate_passes(
+                        components,
+                        &profile_dims,
+                        &mut profile,
+                        &mut cost,
+                        false,
+                        (1, 13, 32),
+                    );
+                    if cost < wide_best {
+                        (wide, wide_best) = (profile, cost);
+                    }
+                }
+            }
+        }
+        self.coordinate_passes(
+            components,
+            dims,
+            &mut wide,
+            &mut wide_best,
+            true,
+            (1, 7, 10),
+        );
+        if polish {
+            (wide, wide_best) = self.polish(components, dims, wide, wide_best);
+        }
+        (wide, wide_best)
     }
 
     /// Coordinate line searches over the dims whose range is not a point (`passes`, `grid`
@@ -2067,6 +2218,45 @@ mod tests {
         let (m, var) = lattice_moments(1e27, 1e-3, 1e-4);
         assert!(m.is_finite() && var == 0.0, "{m} {var}");
         assert_eq!(quantised_variance(1e27, 1e-3, 1e-4), 0.0);
+    }
+
+    #[test]
+    fn dead_zone_moments_match_a_sampled_noisy_dead_zone() {
+        use prognos_core::random::standard_normal;
+        use rand_core::SeedableRng;
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(3);
+        let noise: Vec<f64> = (0..200_000)
+            .map(|_| standard_normal::<f64, _>(&mut rng))
+            .collect();
+        // Inside, on and beyond each edge, zeroing and shifted, noise of 0.3 on a zone of 2.
+        for shift in [0.0, 0.4, 1.0] {
+            for v in [-2.6, -2.0, -1.7, 0.0, 0.5, 1.9, 2.0, 2.2, 3.5] {
+                let readings: Vec<f64> = noise
+                    .iter()
+                    .map(|e| {
+                        GenericKind::DeadZone.apply(&[2.0, shift, 0.0], &[v + 0.3 * e], 1.0)[0]
+                    })
+                    .collect();
+                let n = readings.len() as f64;
+                let mean = readings.iter().sum::<f64>() / n;
+                let var = readings.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n;
+                let (m, w) = dead_zone_moments(v, 2.0, shift, 0.3);
+                assert!((m - mean).abs() < 0.01, "{shift} {v}: {m} {mean}");
+                assert!(
+                    (w - var).abs() < 0.02 * var.max(0.05),
+                    "{shift} {v}: {w} {var}"
+                );
+            }
+        }
+        // Without noise: the map itself, and no spread.
+        assert_eq!(dead_zone_moments(2.5, 2.0, 0.0, 0.0), (2.5, 0.0));
+        assert_eq!(dead_zone_moments(1.5, 2.0, 1.0, 0.0), (0.0, 0.0));
+        // Far beyond the edge: the noise alone, without the cancellation of big squares.
+        let (m, w) = dead_zone_moments(1e6, 2.0, 1.0, 1e-3);
+        assert!(
+            (m - (1e6 - 2.0)).abs() < 1e-6 && (w / 1e-6 - 1.0).abs() < 1e-6,
+            "{m} {w}"
+        );
     }
 
     #[test]

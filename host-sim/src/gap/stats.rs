@@ -181,29 +181,25 @@ pub fn second_differences(y: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// `y` with its readings that sit exactly on a repeated extreme set to NaN: a clip's limit,
-/// where at least 10 and 1 % of the finite readings equal the largest (or the smallest).
-/// Clipped readings carry no noise, and the zero differences between them would pull a
-/// noise estimate down (to 0.4 of the noise on a record clipped two thirds of the time).
-/// For a channel off a lattice: on a lattice every level repeats.
-pub fn without_clipped_extremes(y: &[f64]) -> Vec<f64> {
-    let finite = y.iter().filter(|v| v.is_finite());
-    let (lo, hi) = finite
-        .clone()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    let least = (finite.count() / 100).max(10);
-    let pinned = |level: f64| y.iter().filter(|v| **v == level).count() >= least;
-    let (lo_pinned, hi_pinned) = (pinned(lo), pinned(hi));
+/// `y` with its readings that sit exactly on a repeated level set to NaN: one that at least
+/// 10 and 1 % of the finite readings equal, as a clip's limit or the zero of a deadband
+/// that zeroes small readings. A noisy sensor off a lattice never repeats a reading, so
+/// such readings carry no noise, and the zero differences between them would pull a noise
+/// estimate down (to 0.4 of the noise on a record clipped two thirds of the time, to 0.15
+/// on a speed read as zero for half of it). For a channel off a lattice: on a lattice
+/// every level repeats.
+pub fn without_repeated_levels(y: &[f64]) -> Vec<f64> {
+    let mut finite: Vec<f64> = y.iter().copied().filter(|v| v.is_finite()).collect();
+    let least = (finite.len() / 100).max(10);
+    finite.sort_by(f64::total_cmp);
+    let mut repeated = Vec::new();
+    for run in finite.chunk_by(|a, b| a == b) {
+        if run.len() >= least {
+            repeated.push(run[0]);
+        }
+    }
     y.iter()
-        .map(|&v| {
-            if (lo_pinned && v == lo) || (hi_pinned && v == hi) {
-                f64::NAN
-            } else {
-                v
-            }
-        })
+        .map(|&v| if repeated.contains(&v) { f64::NAN } else { v })
         .collect()
 }
 
@@ -310,7 +306,7 @@ mod tests {
     }
 
     #[test]
-    fn readings_on_a_clips_limits_are_left_out_of_the_noise_estimate() {
+    fn readings_on_a_repeated_level_are_left_out_of_the_noise_estimate() {
         // Noise 0.2 on a sine of amplitude 3 read through a clip at [-1, 2]: about two
         // thirds of the readings sit on a limit with zero differences, and the plain
         // estimate falls to about half the noise.
@@ -323,11 +319,23 @@ mod tests {
             .collect();
         let (plain, _) = noise_std_from_differences(&y).unwrap();
         assert!(plain < 0.15, "{plain}");
-        let kept = without_clipped_extremes(&y);
+        let kept = without_repeated_levels(&y);
         assert_eq!(
             kept.iter().filter(|v| v.is_nan()).count(),
             y.iter().filter(|v| **v == -1.0 || **v == 2.0).count()
         );
+        let (sigma, _) = noise_std_from_differences(&kept).unwrap();
+        assert!((sigma - 0.2).abs() < 0.01, "{sigma}");
+        // A deadband zeroing the readings within 1.5 of zero (about a third of them).
+        let zeroed: Vec<f64> = (0..5000)
+            .map(|k| {
+                let v = 3.0 * (k as f64 * 2e-3).sin() + 0.2 * standard_normal::<f64, _>(&mut rng);
+                if v.abs() < 1.5 { 0.0 } else { v }
+            })
+            .collect();
+        assert!(noise_std_from_differences(&zeroed).unwrap().0 < 0.17);
+        let kept = without_repeated_levels(&zeroed);
+        assert!(kept.iter().filter(|v| v.is_nan()).count() > 1000);
         let (sigma, _) = noise_std_from_differences(&kept).unwrap();
         assert!((sigma - 0.2).abs() < 0.01, "{sigma}");
         // A noisy record without a clip keeps every reading.
@@ -335,11 +343,7 @@ mod tests {
             .iter()
             .map(|v| v + 1e-3 * standard_normal::<f64, _>(&mut rng))
             .collect();
-        assert!(
-            without_clipped_extremes(&free)
-                .iter()
-                .all(|v| v.is_finite())
-        );
+        assert!(without_repeated_levels(&free).iter().all(|v| v.is_finite()));
     }
 
     #[test]
