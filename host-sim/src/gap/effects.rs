@@ -1455,7 +1455,7 @@ impl<'a> Problem<'a> {
         if pinned != dims && best.is_finite() {
             resolve_pinned(&pinned, &mut theta);
             let from_start = start.is_some().then_some(start_theta.as_slice());
-            let (mut wide, mut wide_best) = self.free_extensions(
+            let (wide, wide_best) = self.free_extensions(
                 components,
                 (&dims, &pinned),
                 (&theta, best),
@@ -1466,18 +1466,6 @@ impl<'a> Problem<'a> {
             resolve_pinned(&pinned, &mut neutral);
             // BIC: each parameter costs ln n_train in training cost (squared noise units).
             let penalty = (self.train_chi2(&self.nominal).1.max(2) as f64).ln();
-            // An extension moved along with another that does not pay for itself goes back
-            // (a dead zone's noise nudged to a trace while its shift went to 0).
-            for i in 0..wide.len() {
-                if wide[i] != neutral[i] {
-                    let mut back = wide.clone();
-                    back[i] = neutral[i];
-                    let cost = self.cost_at(components, &dims, &back);
-                    if cost < wide_best + penalty {
-                        (wide, wide_best) = (back, cost);
-                    }
-                }
-            }
             // Only the extensions the freed fit moved off their neutral values count.
             let moved = wide.iter().zip(&neutral).filter(|(w, n)| w != n).count();
             if moved > 0 && wide_best + moved as f64 * penalty < best {
@@ -1624,7 +1612,9 @@ impl<'a> Problem<'a> {
     }
 
     /// Whether the generic components at `theta` leave a training misfit on a channel they
-    /// act on of over [`PROFILE_EXCESS`] times its noise.
+    /// act on: a mean squared standardised residual over [`PROFILE_EXCESS`], or one
+    /// residual beyond [`PROFILE_OUTLIER`] noise std (a misfit at a few transitions, which
+    /// the mean over a long record dilutes).
     fn leaves_a_gap_on_its_channels(
         &self,
         components: &[Component],
@@ -1634,13 +1624,19 @@ impl<'a> Problem<'a> {
         let Ok(sim) = self.predict(&assemble(components, dims, theta)) else {
             return true;
         };
-        let rss = self.channel_rss(&sim, &self.train);
-        components.iter().any(|c| match c {
-            Component::Generic(_, ch) => {
-                let (r, n) = rss[*ch];
-                !(r / (self.sigma[*ch] * self.sigma[*ch]) <= PROFILE_EXCESS * n as f64)
+        components.iter().any(|c| {
+            let Component::Generic(_, ch) = c else {
+                return false;
+            };
+            let (y, m, s) = (&self.measured[*ch], &sim.outputs[*ch], self.sigma[*ch]);
+            let (mut sum, mut n, mut worst) = (0.0, 0usize, 0.0f64);
+            for k in (0..y.len()).filter(|&k| self.train[k] && y[k].is_finite()) {
+                let z = (y[k] - m[k]) / s;
+                sum += z * z;
+                n += 1;
+                worst = worst.max(z.abs());
             }
-            Component::Plant(_) => false,
+            !(sum <= PROFILE_EXCESS * n as f64 && worst <= PROFILE_OUTLIER)
         })
     }
 
@@ -1783,6 +1779,9 @@ impl<'a> Problem<'a> {
 /// residual above this: a noise estimate 10 % off reads 1.2, a fit that misses a zeroing
 /// deadband's zone thousands.
 const PROFILE_EXCESS: f64 = 1.5;
+/// ... or when one residual lies beyond this many noise std (noise reaches it once in
+/// 5e8 samples).
+const PROFILE_OUTLIER: f64 = 6.0;
 
 /// Golden-section steps beyond the asked number while the bracket is not yet flat ...
 const GOLDEN_EXTRA: usize = 16;
