@@ -408,7 +408,7 @@ fn diagnose_timed(
                 f64::INFINITY,
                 "meta",
             ),
-            None => match noise_std_from_differences(&unclipped(&y, lattice_step(&y).is_some())) {
+            None => match noise_std_from_differences(&noisy_readings(&y, on_lattice(&y))) {
                 Some((s, dof)) => match still_lattice_step(&y) {
                     // Noise below the step: over half the second differences are exactly
                     // zero, so the estimate measures the signal's own steps; the error of
@@ -898,12 +898,12 @@ fn refine_noise_from(
         // signal moves slowly its second differences are mostly zero and measure the steps,
         // not the noise. Its readings err by at least their rounding, q / sqrt 12.
         let floor = problem.lattices[c].map_or(0.0, |(q, _)| q / 12f64.sqrt());
-        // Where the readings sit on a clip's limit the residual is the replay's own smooth
-        // curvature, not noise.
-        let off_limits = unclipped(&problem.measured[c], problem.lattices[c].is_some());
+        // Where the readings sit on a clip's limit or a deadband's zero the residual is the
+        // replay's own smooth curvature, not noise.
+        let noisy = noisy_readings(&problem.measured[c], problem.lattices[c].is_some());
         let residual: Vec<f64> = residual
             .iter()
-            .zip(&off_limits)
+            .zip(&noisy)
             .map(|(r, y)| if y.is_nan() { f64::NAN } else { *r })
             .collect();
         if let Some((s, dof)) = noise_std_from_differences(&residual)
@@ -923,9 +923,15 @@ fn refine_noise_from(
     changed
 }
 
-/// The readings `y` with those on a repeated level (a clip's limit) set to NaN
-/// ([`without_repeated_levels`]), unless they lie `on_lattice` (where every value repeats).
-fn unclipped(y: &[f64], on_lattice: bool) -> Vec<f64> {
+/// Whether the readings `y` lie on a lattice ([`lattice_step`]).
+fn on_lattice(y: &[f64]) -> bool {
+    lattice_step(y).is_some()
+}
+
+/// The readings `y` that carry noise: those on a repeated level (a clip's limit, a
+/// deadband's zero) set to NaN ([`without_repeated_levels`]), unless they lie
+/// `on_lattice` (where every value repeats).
+fn noisy_readings(y: &[f64], on_lattice: bool) -> Vec<f64> {
     if on_lattice {
         y.to_vec()
     } else {
