@@ -1288,10 +1288,15 @@ impl<'a> Problem<'a> {
             .filter(|(i, _)| *i != at)
             .map(|(_, f)| f.clone())
             .collect();
-        let sim = self.predict(&others).ok()?;
+        // Alone, its input is the user's model's replay (no new replay nor start refit).
+        let input = if others.is_empty() {
+            self.nominal.outputs.get(c)?.clone()
+        } else {
+            self.predict(&others).ok()?.outputs.get(c)?.clone()
+        };
         Some(NoisySensorReplay {
             sensor,
-            input: sim.outputs.get(c)?.iter().map(|v| v - shift).collect(),
+            input: input.iter().map(|v| v - shift).collect(),
         })
     }
 
