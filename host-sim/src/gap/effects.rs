@@ -32,8 +32,14 @@ enum NoisySensor {
     /// Step and noise before it; the input is shifted so that it rounds to the nearest
     /// multiple of the step (see [`GenericKind::Quantisation`]).
     Quantiser { step: f64, noise: f64 },
-    /// Width, shift and noise before it (see [`GenericKind::DeadZone`]).
-    DeadZone { width: f64, shift: f64, noise: f64 },
+    /// Width, shift and noise before it (see [`GenericKind::DeadZone`]), and the channel's
+    /// noise variance.
+    DeadZone {
+        width: f64,
+        shift: f64,
+        noise: f64,
+        channel_variance: f64,
+    },
 }
 
 impl NoisySensorReplay {
@@ -42,11 +48,17 @@ impl NoisySensorReplay {
         let v = self.input.get(k).copied().unwrap_or(f64::NAN);
         match self.sensor {
             NoisySensor::Quantiser { step, noise } => quantised_variance(v, step, noise),
+            // No less than the channel's noise: a dead zone may explain jumps at its edge,
+            // but not readings quieter than the noise (a noise-free record's hard stop at 0,
+            // progpy's closed valve, read as a zeroing deadband).
             NoisySensor::DeadZone {
                 width,
                 shift,
                 noise,
-            } => dead_zone_moments(v, width, shift, noise).1,
+                channel_variance,
+            } => dead_zone_moments(v, width, shift, noise)
+                .1
+                .max(channel_variance),
         }
     }
 }
@@ -1278,6 +1290,7 @@ impl<'a> Problem<'a> {
                     width: v[0],
                     shift: v.get(1).copied().unwrap_or(1.0),
                     noise: v.get(2).copied().unwrap_or(0.0),
+                    channel_variance: self.sigma[c] * self.sigma[c],
                 },
                 0.0,
             ),
