@@ -408,24 +408,26 @@ fn diagnose_timed(
                 f64::INFINITY,
                 "meta",
             ),
-            None => match noise_std_from_differences(&noisy_readings(&y, on_lattice(&y))) {
-                Some((s, dof)) => match still_lattice_step(&y) {
-                    // Noise below the step: over half the second differences are exactly
-                    // zero, so the estimate measures the signal's own steps; the error of
-                    // such readings is their rounding, of variance q^2 / 12 (Sheppard).
-                    Some(q) if q / 12f64.sqrt() < s => (q / 12f64.sqrt(), dof, "lattice step"),
-                    _ => (s, dof, "differences"),
-                },
-                None => {
-                    return Err(header_error(
-                        csv_path,
-                        format!(
-                            "cannot estimate the noise of `{key}` (constant or too few finite \
+            None => {
+                match noise_std_from_differences(&noisy_readings(&y, lattice_step(&y).is_some())) {
+                    Some((s, dof)) => match still_lattice_step(&y) {
+                        // Noise below the step: over half the second differences are exactly
+                        // zero, so the estimate measures the signal's own steps; the error of
+                        // such readings is their rounding, of variance q^2 / 12 (Sheppard).
+                        Some(q) if q / 12f64.sqrt() < s => (q / 12f64.sqrt(), dof, "lattice step"),
+                        _ => (s, dof, "differences"),
+                    },
+                    None => {
+                        return Err(header_error(
+                            csv_path,
+                            format!(
+                                "cannot estimate the noise of `{key}` (constant or too few finite \
                              samples): declare it in the meta file's [noise] table"
-                        ),
-                    ));
+                            ),
+                        ));
+                    }
                 }
-            },
+            }
         };
         sigma.push(s);
         sigma_dof.push(dof);
@@ -923,14 +925,9 @@ fn refine_noise_from(
     changed
 }
 
-/// Whether the readings `y` lie on a lattice ([`lattice_step`]).
-fn on_lattice(y: &[f64]) -> bool {
-    lattice_step(y).is_some()
-}
-
 /// The readings `y` that carry noise: those on a repeated level (a clip's limit, a
 /// deadband's zero) set to NaN ([`without_repeated_levels`]), unless they lie
-/// `on_lattice` (where every value repeats).
+/// `on_lattice` ([`lattice_step`]), where every value repeats.
 fn noisy_readings(y: &[f64], on_lattice: bool) -> Vec<f64> {
     if on_lattice {
         y.to_vec()

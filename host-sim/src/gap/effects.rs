@@ -1547,8 +1547,8 @@ impl<'a> Problem<'a> {
     /// The fit with the extension parameters free, from `theta` (the fit with them held at
     /// neutral under `pinned`, of training cost `best`), returned with its training cost. A
     /// pair (`start` given) also tries its singles' extensions; a single whose simpler fit
-    /// leaves a gap on its channel also refits its other parameters with each extension
-    /// held at its range's ends and middle, since an extension can matter that much only
+    /// leaves a gap on its channel also refits its other parameters with the extensions
+    /// held at the [`extension_profiles`], since an extension can matter that much only
     /// far from the simpler fit (a zeroing deadband only with a wide zone, which a shifted
     /// dead zone cannot fit).
     fn free_extensions(
@@ -1573,45 +1573,37 @@ impl<'a> Problem<'a> {
                 (wide, wide_best) = (from_start, cost);
             }
         } else if self.leaves_a_gap_on_its_channels(components, pinned, theta) {
-            for (i, d) in dims.iter().enumerate() {
-                let Some(Neutral::At(neutral)) = d.neutral else {
-                    continue;
-                };
-                for u in [0.0, 0.5, 1.0] {
-                    let v = to_value(d, u);
-                    if v == neutral {
-                        continue;
+            for held_at in extension_profiles(pinned) {
+                let profile_dims: Vec<Dim> = pinned
+                    .iter()
+                    .zip(&held_at)
+                    .map(|(p, at)| match at {
+                        Some(v) => Dim {
+                            lo: *v,
+                            hi: *v,
+                            pinned: false,
+                            ..p.clone()
+                        },
+                        None => p.clone(),
+                    })
+                    .collect();
+                let mut profile = theta.to_vec();
+                for (value, at) in profile.iter_mut().zip(&held_at) {
+                    if let Some(v) = at {
+                        *value = *v;
                     }
-                    let profile_dims: Vec<Dim> = pinned
-                        .iter()
-                        .enumerate()
-                        .map(|(j, p)| {
-                            if j == i {
-                                Dim {
-                                    lo: v,
-                                    hi: v,
-                                    pinned: false,
-                                    ..p.clone()
-                                }
-                            } else {
-                                p.clone()
-                            }
-                        })
-                        .collect();
-                    let mut profile = theta.to_vec();
-                    profile[i] = v;
-                    let mut cost = self.cost_at(components, &profile_dims, &profile);
-                    self.coordinate_passes(
-                        components,
-                        &profile_dims,
-                        &mut profile,
-                        &mut cost,
-                        false,
-                        (1, 13, 32),
-                    );
-                    if cost < wide_best {
-                        (wide, wide_best) = (profile, cost);
-                    }
+                }
+                let mut cost = self.cost_at(components, &profile_dims, &profile);
+                self.coordinate_passes(
+                    components,
+                    &profile_dims,
+                    &mut profile,
+                    &mut cost,
+                    false,
+                    (1, 13, 32),
+                );
+                if cost < wide_best {
+                    (wide, wide_best) = (profile, cost);
                 }
             }
         }
@@ -1792,7 +1784,7 @@ impl<'a> Problem<'a> {
     }
 }
 
-/// A single's extension parameters are profiled (refitted at their ranges' ends and middle)
+/// A single's extension parameters are profiled (refitted at the [`extension_profiles`])
 /// only when its simpler fit leaves its channel's mean squared standardised training
 /// residual above this: a noise estimate 10 % off reads 1.2, a fit that misses a zeroing
 /// deadband's zone thousands.
@@ -2062,6 +2054,48 @@ fn to_value(d: &Dim, u: f64) -> f64 {
         Scale::Linear => d.lo + u * (d.hi - d.lo),
         Scale::Log => (d.lo.ln() + u * (d.hi.ln() - d.lo.ln())).exp(),
     }
+}
+
+/// The points at which [`Problem::free_extensions`] profiles the other parameters: per
+/// dim, the value an extension is held at (`None`: not an extension, fitted as before).
+/// Each extension takes its neutral value or its range's ends and middle, jointly with the
+/// others (a zeroing deadband after the noise needs both `shift = 0` and the noise), every
+/// combination but the all-neutral one.
+fn extension_profiles(dims: &[Dim]) -> Vec<Vec<Option<f64>>> {
+    let mut points: Vec<Vec<Option<f64>>> = vec![vec![]];
+    for d in dims {
+        let values: Vec<Option<f64>> = match d.neutral {
+            Some(Neutral::At(neutral)) => {
+                let mut v = vec![neutral];
+                for u in [0.0, 0.5, 1.0] {
+                    let x = to_value(d, u);
+                    if !v.contains(&x) {
+                        v.push(x);
+                    }
+                }
+                v.into_iter().map(Some).collect()
+            }
+            _ => vec![None],
+        };
+        points = points
+            .iter()
+            .flat_map(|p| {
+                values.iter().map(move |v| {
+                    let mut q = p.clone();
+                    q.push(*v);
+                    q
+                })
+            })
+            .collect();
+    }
+    let all_neutral = |p: &Vec<Option<f64>>| {
+        p.iter().zip(dims).all(|(v, d)| match (v, d.neutral) {
+            (Some(v), Some(Neutral::At(n))) => *v == n,
+            _ => true,
+        })
+    };
+    points.retain(|p| !all_neutral(p));
+    points
 }
 
 /// Whether the fit searches `d`: its range is not a point and it is not pinned.
@@ -2366,5 +2400,34 @@ mod tests {
             quantised_mean(0.3, 1.0, 0.5),
         );
         assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+    }
+
+    #[test]
+    fn a_dead_zone_is_profiled_at_every_joint_shift_and_noise_but_the_neutral_one() {
+        let kind = GenericKind::DeadZone;
+        let dims: Vec<Dim> = kind
+            .param_names()
+            .iter()
+            .zip(kind.ranges(10.0, 20.0, 2.0, 0.01))
+            .zip(kind.neutral_values())
+            .map(|((name, (lo, hi, scale)), neutral)| Dim {
+                component: 0,
+                name: name.to_string(),
+                lo,
+                hi,
+                scale,
+                neutral: *neutral,
+                pinned: false,
+            })
+            .collect();
+        let profiles = extension_profiles(&dims);
+        // Shift {1, 0, 0.5} times noise {0, 1.5, 3}, the width fitted in each.
+        assert_eq!(profiles.len(), 8, "{profiles:?}");
+        assert!(profiles.iter().all(|p| p[0].is_none()));
+        assert!(!profiles.contains(&vec![None, Some(1.0), Some(0.0)]));
+        // The zeroing deadband after the noise: shift 0 with the noise on.
+        assert!(profiles.contains(&vec![None, Some(0.0), Some(3.0)]));
+        assert!(profiles.contains(&vec![None, Some(0.0), Some(0.0)]));
+        assert!(profiles.contains(&vec![None, Some(1.0), Some(1.5)]));
     }
 }
