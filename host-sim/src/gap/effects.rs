@@ -422,12 +422,21 @@ pub fn dead_zone_moments(v: f64, width: f64, shift: f64, s: f64) -> (f64, f64) {
     }
 }
 
+/// The index of a dead zone's `noise_std` among its parameters.
+const DEAD_ZONE_NOISE: usize = 2;
+
+/// Readings exactly 0 that mark a deadband applied after the noise: a noisy sensor never
+/// reads exactly 0, but a record may hold a few zeros as fill values.
+const ZEROS_OF_A_DEADBAND: usize = 10;
+
 /// Whether a fitted component at `values` is a [`NoisySensorReplay`]'s sensor: a quantiser,
 /// or a dead zone with noise before it.
 fn is_noisy_sensor(component: &Component, values: &[f64]) -> bool {
     match component {
         Component::Generic(GenericKind::Quantisation, _) => true,
-        Component::Generic(GenericKind::DeadZone, _) => values.get(2).is_some_and(|s| *s > 0.0),
+        Component::Generic(GenericKind::DeadZone, _) => {
+            values.get(DEAD_ZONE_NOISE).is_some_and(|s| *s > 0.0)
+        }
         _ => false,
     }
 }
@@ -718,19 +727,35 @@ impl<'a> Problem<'a> {
                         // steps a step off by a fraction of a percent misplaces the lattice.
                         ranges[0] = (q, q, Scale::Linear);
                     }
+                    // Readings exactly 0, again and again, off a lattice: no noise comes
+                    // after a deadband that zeroes them, so the noise before it is the
+                    // channel's, measured off the other readings. Fitted, it fell to 0
+                    // where the training blocks cross the edge only where a hard edge
+                    // agrees (a mean and variance misjudge the two-valued reading there).
+                    let zeroed_after_the_noise = *kind == GenericKind::DeadZone
+                        && self.lattices[*ch].is_none()
+                        && self.measured[*ch].iter().filter(|v| **v == 0.0).count()
+                            >= ZEROS_OF_A_DEADBAND;
+                    if zeroed_after_the_noise {
+                        ranges[DEAD_ZONE_NOISE] = (sigma, sigma, Scale::Linear);
+                    }
                     for ((name, (lo, hi, scale)), neutral) in kind
                         .param_names()
                         .iter()
                         .zip(ranges)
                         .zip(kind.neutral_values())
                     {
+                        let neutral = match neutral {
+                            Some(Neutral::At(v)) => Some(Neutral::At(v.clamp(lo, hi))),
+                            n => *n,
+                        };
                         dims.push(Dim {
                             component: ci,
                             name: name.to_string(),
                             lo,
                             hi,
                             scale,
-                            neutral: *neutral,
+                            neutral,
                             pinned: false,
                         });
                     }
