@@ -182,7 +182,9 @@ impl GenericKind {
                  y_model + e`, on average over sensor noise `e` (std `noise_std`) before the \
                  zone; `shift = 1` (the shifted dead zone `sign(y_model) max(abs(y_model) - \
                  width, 0)`) and `noise_std = 0` unless they pay for their parameters \
-                 (`shift = 0`: readings zeroed below `width`, as a low-flow cutoff)"
+                 (`shift = 0`: readings zeroed below `width`, as a low-flow cutoff); on a \
+                 channel read exactly 0 ten times or more the zone comes after the noise \
+                 and `noise_std` is the channel's noise"
             }
             GenericKind::FirstOrderLag => "first-order sensor lag, time constant `tau_s`",
         }
