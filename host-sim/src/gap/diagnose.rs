@@ -6,6 +6,7 @@ use crate::error::SimError;
 use crate::gap::analysis::{ALPHA, WhereReport, analyse};
 use crate::gap::effects::{
     Component, Evaluation, GenericKind, Problem, channel_lattices, flat_values, lattice_step,
+    zeroed_channels,
 };
 use crate::gap::meta::{GapMeta, read_gap_meta};
 use crate::gap::plant::{
@@ -466,6 +467,8 @@ fn diagnose_timed(
             .ok()
             .map(|sim| sim.outputs)
     });
+    let lattices = channel_lattices(&measured);
+    let zeroed = zeroed_channels(&measured, &lattices);
     let mut problem = Problem {
         plant: &wrapped,
         data,
@@ -473,7 +476,8 @@ fn diagnose_timed(
         sim_effects: sim_effects.clone(),
         plant_effects,
         outputs: present.iter().map(|(_, n)| n.clone()).collect(),
-        lattices: channel_lattices(&measured),
+        lattices,
+        zeroed,
         measured,
         sigma,
         sigma_dof,

@@ -572,6 +572,9 @@ pub struct Problem<'a> {
     /// Per channel, the step and offset of the lattice its readings lie on (see
     /// [`channel_lattices`]).
     pub lattices: Vec<Option<(f64, f64)>>,
+    /// Per channel, whether a deadband after the noise zeroed its readings (see
+    /// [`zeroed_channels`]).
+    pub zeroed: Vec<bool>,
     /// Noise std per channel.
     pub sigma: Vec<f64>,
     /// Effective degrees of freedom of each sigma (infinite when declared in meta).
@@ -734,11 +737,7 @@ impl<'a> Problem<'a> {
                     // channel's, measured off the other readings. Fitted, it fell to 0
                     // where the training blocks cross the edge only where a hard edge
                     // agrees (a mean and variance misjudge the two-valued reading there).
-                    let zeroed_after_the_noise = *kind == GenericKind::DeadZone
-                        && self.lattices[*ch].is_none()
-                        && self.measured[*ch].iter().filter(|v| **v == 0.0).count()
-                            >= ZEROS_OF_A_DEADBAND;
-                    if zeroed_after_the_noise {
+                    if *kind == GenericKind::DeadZone && self.zeroed[*ch] {
                         ranges[DEAD_ZONE_NOISE] = (sigma, sigma, Scale::Linear);
                     }
                     for ((name, (lo, hi, scale)), neutral) in kind
@@ -1925,6 +1924,19 @@ pub fn channel_lattices(measured: &[Vec<f64>]) -> Vec<Option<(f64, f64)>> {
     measured
         .iter()
         .map(|y| lattice_step(y).map(|q| (q, lattice_offset(y, q))))
+        .collect()
+}
+
+/// Per channel of `measured` with `lattices` as [`channel_lattices`] gives them, whether
+/// its readings are off a lattice and at least [`ZEROS_OF_A_DEADBAND`] of them exactly 0:
+/// the mark of a deadband applied after the noise.
+pub fn zeroed_channels(measured: &[Vec<f64>], lattices: &[Option<(f64, f64)>]) -> Vec<bool> {
+    measured
+        .iter()
+        .zip(lattices)
+        .map(|(y, lattice)| {
+            lattice.is_none() && y.iter().filter(|v| **v == 0.0).count() >= ZEROS_OF_A_DEADBAND
+        })
         .collect()
 }
 
