@@ -233,13 +233,13 @@ impl GenericKind {
                 let b = (0.5 * span).max(10.0 * sigma);
                 vec![(-b, b, Scale::Linear)]
             }
-            GenericKind::SensorScale => vec![(-0.5, 0.5, Scale::Linear)],
+            GenericKind::SensorScale => vec![(-0.9, 3.0, Scale::Linear)],
             GenericKind::Quantisation => vec![
                 (0.05 * sigma, (0.25 * span).max(sigma), Scale::Log),
                 (1e-3 * sigma, 2.0 * sigma, Scale::Log),
                 (-0.5, 0.5, Scale::Linear),
             ],
-            GenericKind::MeasurementDelay => vec![(0.0, 25.0 * dt, Scale::Linear)],
+            GenericKind::MeasurementDelay => vec![(0.01 * dt, 200.0 * dt, Scale::Log)],
             GenericKind::OutputSaturation => {
                 vec![
                     (0.05 * a, a, Scale::Linear),
