@@ -1698,10 +1698,12 @@ fn truth_read_through(plant: &str, channel: &str, sensor: impl Fn(&[f64]) -> Vec
         k += 1;
         read[k - 1] + noise
     });
-    for column in d.csv.lines().next().unwrap().to_string().split(',') {
-        if column.starts_with("x:") {
-            d.csv = without_column(&d.csv, column);
-        }
+    let truths: Vec<String> = (d.csv.lines().next().unwrap().split(','))
+        .filter(|c| c.starts_with("x:"))
+        .map(String::from)
+        .collect();
+    for column in &truths {
+        d.csv = without_column(&d.csv, column);
     }
     d
 }
