@@ -1743,3 +1743,20 @@ fn a_sensor_reading_under_half_the_truth_is_a_sensor_scale() {
     assert!((scale + 0.55).abs() < 0.005, "{scale}");
     assert!(v["ranking"][0]["shrink"].as_f64().unwrap() > 0.8);
 }
+
+#[test]
+fn a_quantiser_before_the_noise_is_found_from_readings_off_its_lattice() {
+    // `q round(y / q) + e`: the readings scatter about the lattice, so no exact step shows
+    // in them. The quantiser was only a candidate on a lattice, and such records came out
+    // `unknown` or as a sensor mimic.
+    let dir = scratch("staircase");
+    let step = 0.15;
+    let d = truth_read_through("dc_motor", "current", |x| {
+        x.iter().map(|v| step * (v / step).round()).collect()
+    });
+    let (_, v) = diagnose(&dir, &d);
+    assert_eq!(v["verdict"], "quantisation:current", "{}", v["ranking"][0]);
+    let fitted = v["ranking"][0]["params"][0][1].as_f64().unwrap();
+    assert!((fitted / step - 1.0).abs() < 1e-3, "{fitted}");
+    assert!(v["ranking"][0]["shrink"].as_f64().unwrap() > 0.8);
+}

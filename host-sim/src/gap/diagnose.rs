@@ -5,8 +5,8 @@ use crate::dataio::{Recording, read_recording};
 use crate::error::SimError;
 use crate::gap::analysis::{ALPHA, WhereReport, analyse};
 use crate::gap::effects::{
-    Component, Evaluation, GenericKind, Problem, channel_lattices, flat_values, lattice_step,
-    zeroed_channels,
+    Component, Evaluation, GenericKind, Problem, channel_lattices, channel_staircases, flat_values,
+    lattice_step, zeroed_channels,
 };
 use crate::gap::meta::{GapMeta, read_gap_meta};
 use crate::gap::plant::{
@@ -469,6 +469,7 @@ fn diagnose_timed(
     });
     let lattices = channel_lattices(&measured);
     let zeroed = zeroed_channels(&measured, &lattices);
+    let staircases = channel_staircases(&measured, &lattices);
     let mut problem = Problem {
         plant: &wrapped,
         data,
@@ -477,6 +478,7 @@ fn diagnose_timed(
         plant_effects,
         outputs: present.iter().map(|(_, n)| n.clone()).collect(),
         lattices,
+        staircases,
         zeroed,
         measured,
         sigma,

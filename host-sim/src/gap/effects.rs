@@ -29,9 +29,10 @@ pub struct NoisySensorReplay {
 
 /// The sensors of [`NoisySensorReplay`] with the parameters their reading variance needs.
 enum NoisySensor {
-    /// Step and noise before it; the input is shifted so that it rounds to the nearest
-    /// multiple of the step (see [`GenericKind::Quantisation`]).
-    Quantiser { step: f64, noise: f64 },
+    /// Step, noise before it and the variance of the noise after it (none on a lattice);
+    /// the input is shifted so that it rounds to the nearest multiple of the step (see
+    /// [`GenericKind::Quantisation`]).
+    Quantiser { step: f64, noise: f64, after: f64 },
     /// Width, shift and noise before it (see [`GenericKind::DeadZone`]), and the channel's
     /// noise variance.
     DeadZone {
@@ -47,7 +48,9 @@ impl NoisySensorReplay {
     pub fn variance(&self, k: usize) -> f64 {
         let v = self.input.get(k).copied().unwrap_or(f64::NAN);
         match self.sensor {
-            NoisySensor::Quantiser { step, noise } => quantised_variance(v, step, noise),
+            NoisySensor::Quantiser { step, noise, after } => {
+                quantised_variance(v, step, noise) + after
+            }
             // No less than the channel's noise: a dead zone may explain jumps at its edge,
             // but not readings quieter than the noise (a noise-free record's hard stop at 0,
             // progpy's closed valve, read as a zeroing deadband).
@@ -431,16 +434,19 @@ const DEAD_ZONE_NOISE: usize = 2;
 /// reads exactly 0, but a record may hold a few zeros as fill values.
 const ZEROS_OF_A_DEADBAND: usize = 10;
 
-/// Whether a fitted component at `values` is a [`NoisySensorReplay`]'s sensor: a quantiser,
-/// or a dead zone with noise before it.
+/// The index of a quantiser's noise before it among its parameters.
+const QUANTISER_NOISE: usize = 1;
+
+/// Whether a fitted component at `values` is a [`NoisySensorReplay`]'s sensor: a quantiser
+/// or a dead zone, with noise before it (without, it is a static map read with the
+/// channel's noise after it).
 fn is_noisy_sensor(component: &Component, values: &[f64]) -> bool {
-    match component {
-        Component::Generic(GenericKind::Quantisation, _) => true,
-        Component::Generic(GenericKind::DeadZone, _) => {
-            values.get(DEAD_ZONE_NOISE).is_some_and(|s| *s > 0.0)
-        }
-        _ => false,
-    }
+    let noise = match component {
+        Component::Generic(GenericKind::Quantisation, _) => QUANTISER_NOISE,
+        Component::Generic(GenericKind::DeadZone, _) => DEAD_ZONE_NOISE,
+        _ => return false,
+    };
+    values.get(noise).is_some_and(|s| *s > 0.0)
 }
 
 /// What a quantiser with `params` (step, noise, threshold, lattice offset) subtracts from its
@@ -572,6 +578,9 @@ pub struct Problem<'a> {
     /// Per channel, the step and offset of the lattice its readings lie on (see
     /// [`channel_lattices`]).
     pub lattices: Vec<Option<(f64, f64)>>,
+    /// Per channel off a lattice, the step and offset of a lattice its readings scatter
+    /// about (a quantiser before the noise; see [`staircase_lattice`]).
+    pub staircases: Vec<Option<(f64, f64)>>,
     /// Per channel, whether a deadband after the noise zeroed its readings (see
     /// [`zeroed_channels`]).
     pub zeroed: Vec<bool>,
@@ -667,6 +676,12 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// The step and offset of the lattice channel `ch` reads on ([`Problem::lattices`]) or
+    /// scatters about ([`Problem::staircases`]), if any.
+    fn lattice_of(&self, ch: usize) -> Option<(f64, f64)> {
+        self.lattices[ch].or(self.staircases[ch])
+    }
+
     /// Every single-component candidate.
     pub fn single_candidates(&self) -> Vec<Component> {
         let mut out: Vec<Component> = (0..self.plant_effects.len())
@@ -682,9 +697,10 @@ impl<'a> Problem<'a> {
                         .any(|(k, c)| *k == kind.name() && c == channel)
                 });
                 // A quantiser's readings lie on its lattice whatever the noise before it
-                // (`y = q round((y_model + e) / q)`); off a lattice its conditional mean is
-                // only a periodic distortion that mimics other effects.
-                let impossible = kind == GenericKind::Quantisation && self.lattices[ch].is_none();
+                // (`y = q round((y_model + e) / q)`), or scatter about one with the noise
+                // after it; else its conditional mean is only a periodic distortion that
+                // mimics other effects.
+                let impossible = kind == GenericKind::Quantisation && self.lattice_of(ch).is_none();
                 if !replaced && !impossible {
                     out.push(Component::Generic(kind, ch));
                 }
@@ -727,7 +743,8 @@ impl<'a> Problem<'a> {
                     let span = (hi - lo).max(0.0);
                     let sigma = self.sigma[*ch];
                     let mut ranges = kind.ranges(amplitude, span, sigma, self.data.dt);
-                    if let (GenericKind::Quantisation, Some((q, _))) = (kind, self.lattices[*ch]) {
+                    if let (GenericKind::Quantisation, Some((q, _))) = (kind, self.lattice_of(*ch))
+                    {
                         // The readings give the step to float precision; over thousands of
                         // steps a step off by a fraction of a percent misplaces the lattice.
                         ranges[0] = (q, q, Scale::Linear);
@@ -772,7 +789,7 @@ impl<'a> Problem<'a> {
         let mut v = values.to_vec();
         if kind == GenericKind::Quantisation {
             v.resize(3, 0.0);
-            v.push(self.lattices[ch].map_or(0.0, |(_, offset)| offset));
+            v.push(self.lattice_of(ch).map_or(0.0, |(_, offset)| offset));
         }
         v
     }
@@ -1308,6 +1325,10 @@ impl<'a> Problem<'a> {
                 NoisySensor::Quantiser {
                     step: v[0],
                     noise: v[1],
+                    after: match self.lattices[c] {
+                        Some(_) => 0.0,
+                        None => self.sigma[c] * self.sigma[c],
+                    },
                 },
                 quantiser_shift(&v),
             ),
@@ -1927,6 +1948,123 @@ pub fn channel_lattices(measured: &[Vec<f64>]) -> Vec<Option<(f64, f64)>> {
         .collect()
 }
 
+/// Per channel of `measured` off a lattice (`lattices` as [`channel_lattices`] gives
+/// them), the step and offset of a lattice its readings scatter about
+/// ([`staircase_lattice`]).
+pub fn channel_staircases(
+    measured: &[Vec<f64>],
+    lattices: &[Option<(f64, f64)>],
+) -> Vec<Option<(f64, f64)>> {
+    measured
+        .iter()
+        .zip(lattices)
+        .map(|(y, lattice)| match lattice {
+            Some(_) => None,
+            None => staircase_lattice(y),
+        })
+        .collect()
+}
+
+/// Bins of the readings' histogram whose spectrum [`staircase_lattice`] searches.
+const STAIRCASE_BINS: usize = 1 << 19;
+
+/// Least mean resultant length of the readings modulo a staircase's step: a quantiser
+/// before noise of std `s` gives `exp(-2 pi^2 s^2 / q^2)`, 0.19 at `q = sqrt 12 s` (an
+/// effect-to-noise ratio of 1), 0.66 at ratio 2.
+const STAIRCASE_RESULTANT: f64 = 0.3;
+
+/// The step `q` and offset `c` of a lattice `c + j q` that the readings `y` scatter about,
+/// as a quantiser before the noise leaves them: modulo the right step the distinct finite
+/// readings bunch about one residue. Each reading is weighted by the inverse of the number
+/// of readings within 1/40 of their span of it, so that every stretch of the span counts
+/// alike (a record that dwells at a few levels bunches at any step much wider than the
+/// noise). The step is the spatial frequency at which the weighted mean resultant length
+/// is largest (the spectrum of the weighted histogram, refined on the readings), taken down
+/// to a subharmonic that bunches nearly as tightly (a coarse staircase bunches almost as
+/// tightly at twice its frequency). Accepted with at least three levels across the
+/// readings, a resultant of [`STAIRCASE_RESULTANT`], and `n_eff R^2` beyond the largest
+/// noise resultant of the searched frequencies by `exp(-20)`.
+pub fn staircase_lattice(y: &[f64]) -> Option<(f64, f64)> {
+    let mut values: Vec<f64> = y.iter().copied().filter(|v| v.is_finite()).collect();
+    values.sort_by(f64::total_cmp);
+    // Readings repeated exactly (a clip's limit, a deadband's zero) would bunch at every
+    // frequency.
+    values.dedup();
+    let n = values.len();
+    let (lo, hi) = (*values.first()?, *values.last()?);
+    let span = hi - lo;
+    if n < 20 || span <= 0.0 {
+        return None;
+    }
+    let width = span / (STAIRCASE_BINS - 1) as f64;
+    let bins: Vec<usize> = values
+        .iter()
+        .map(|v| (((v - lo) / width).round() as usize).min(STAIRCASE_BINS - 1))
+        .collect();
+    let reach = span / 40.0;
+    let weights: Vec<f64> = values
+        .iter()
+        .map(|v| {
+            let from = values.partition_point(|u| *u < v - reach);
+            let to = values.partition_point(|u| *u <= v + reach);
+            1.0 / (to - from).max(1) as f64
+        })
+        .collect();
+    let (sum, sum_sq) = weights
+        .iter()
+        .fold((0.0, 0.0), |(a, b), w| (a + w, b + w * w));
+    let effective = sum * sum / sum_sq;
+    let padded = 2 * STAIRCASE_BINS;
+    let mut spectrum = vec![rustfft::num_complex::Complex::<f64>::new(0.0, 0.0); padded];
+    for (bin, w) in bins.iter().zip(&weights) {
+        spectrum[*bin].re += w;
+    }
+    rustfft::FftPlanner::new()
+        .plan_fft_forward(padded)
+        .process(&mut spectrum);
+    // Frequency k / (padded width): at least three levels, at least eight bins a step.
+    let frequency = |k: usize| k as f64 / (padded as f64 * width);
+    let (k_lo, k_hi) = ((3.0 / (span * frequency(1))).ceil() as usize, padded / 8);
+    let k_best =
+        (k_lo..=k_hi).max_by(|a, b| spectrum[*a].norm_sqr().total_cmp(&spectrum[*b].norm_sqr()))?;
+    let resultant = |f: f64| {
+        let (mut sin, mut cos) = (0.0, 0.0);
+        for (v, w) in values.iter().zip(&weights) {
+            let phase = std::f64::consts::TAU * f * (v - lo);
+            sin += w * phase.sin();
+            cos += w * phase.cos();
+        }
+        (sin * sin + cos * cos).sqrt() / sum
+    };
+    // The peak between the neighbouring frequencies of the spectrum.
+    let refined = |f: f64| {
+        let half = frequency(1);
+        let mut cost = |u: f64| -resultant(f + (u - 0.5) * 2.0 * half);
+        let (u, c) = grid_then_golden(&mut cost, 0.0, 1.0, 5, 30, None);
+        (f + (u - 0.5) * 2.0 * half, -c)
+    };
+    let (mut f, mut r) = refined(frequency(k_best));
+    // A staircase far wider than the noise bunches nearly as tightly at twice its
+    // frequency; its subharmonics do not bunch at all.
+    for m in (2..=8).rev() {
+        let low = f / m as f64;
+        if low < frequency(k_lo) {
+            continue;
+        }
+        let (f_low, r_low) = refined(low);
+        if r >= STAIRCASE_RESULTANT && r_low >= r - 0.25 * (1.0 - r) {
+            (f, r) = (f_low, r_low);
+            break;
+        }
+    }
+    let searched = (k_hi - k_lo + 1) as f64;
+    if r < STAIRCASE_RESULTANT || effective * r * r < searched.ln() + 20.0 {
+        return None;
+    }
+    let q = 1.0 / f;
+    Some((q, lattice_offset(&values, q)))
+}
+
 /// Per channel of `measured` with `lattices` as [`channel_lattices`] gives them, whether
 /// its readings are off a lattice and at least [`ZEROS_OF_A_DEADBAND`] of them exactly 0:
 /// the mark of a deadband applied after the noise.
@@ -2439,6 +2577,38 @@ mod tests {
             quantised_mean(0.3, 1.0, 0.5),
         );
         assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+    }
+
+    #[test]
+    fn a_staircase_under_noise_gives_its_step_and_smooth_readings_none() {
+        // A sweep over 40 steps of 0.3, read with noise of std 0.05 after the quantiser.
+        let mut state = 12345u64;
+        let mut noise = || {
+            // Sum of four uniforms: near-Gaussian, std 0.05.
+            (0..4)
+                .map(|_| {
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+                })
+                .sum::<f64>()
+                * 0.05
+                * 3f64.sqrt()
+        };
+        let step = 0.3;
+        let sweep: Vec<f64> = (0..3000)
+            .map(|k| 6.0 * (k as f64 / 400.0).sin() + 0.1)
+            .collect();
+        let read: Vec<f64> = sweep
+            .iter()
+            .map(|v| step * (v / step).round() + noise())
+            .collect();
+        let (q, offset) = staircase_lattice(&read).unwrap();
+        assert!((q / step - 1.0).abs() < 1e-3, "{q}");
+        assert!(offset.abs() < 0.01, "{offset}");
+        let smooth: Vec<f64> = sweep.iter().map(|v| v + noise()).collect();
+        assert_eq!(staircase_lattice(&smooth), None);
     }
 
     #[test]
