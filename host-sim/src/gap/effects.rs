@@ -938,7 +938,9 @@ impl<'a> Problem<'a> {
                 let effects: Vec<(GenericKind, Vec<f64>)> = fitted
                     .iter()
                     .filter_map(|(c, v)| match c {
-                        Component::Generic(kind, c) if *c == ch => Some((*kind, v.clone())),
+                        Component::Generic(kind, c) if *c == ch => {
+                            Some((*kind, self.with_lattice(*kind, ch, v)))
+                        }
                         _ => None,
                     })
                     .collect();

@@ -39,7 +39,8 @@ impl ChannelSensor {
     }
 
     /// The channel as a sensor with `effects` (generic kind and its fitted values) reads
-    /// `measured`, sampled every `dt`, with noise std `sigma`.
+    /// `measured`, sampled every `dt`, with noise std `sigma` (a quantiser's values: step,
+    /// noise before it, threshold, lattice offset).
     pub fn new(measured: &[f64], sigma: f64, dt: f64, effects: &[(GenericKind, Vec<f64>)]) -> Self {
         let mut readings = measured.to_vec();
         let mut sigma = sigma;
@@ -57,8 +58,11 @@ impl ChannelSensor {
                     // Read as the model's output plus rounding noise of variance
                     // step^2 / 12 on the noise fitted before the quantiser: through the
                     // staircase of its mean the sigma points would see steps, not a slope.
+                    // Readings off its lattice carry the channel's noise after it too.
                     let before = values.get(1).copied().unwrap_or(sigma);
-                    sigma = (before * before + p * p / 12.0).sqrt();
+                    let offset = values.get(3).copied().unwrap_or(0.0);
+                    let after = if on_lattice(measured, p, offset) { 0.0 } else { sigma };
+                    sigma = (before * before + p * p / 12.0 + after * after).sqrt();
                     // Thresholds above round-to-nearest lower the mean reading.
                     let threshold = values.get(2).copied().unwrap_or(0.0);
                     maps.push((GenericKind::SensorBias, vec![-threshold * p]));
@@ -79,6 +83,16 @@ impl ChannelSensor {
             kind.static_reading(values, y).unwrap_or(y)
         })
     }
+}
+
+/// Whether every finite reading of `y` lies on the lattice `offset + k step` (to float
+/// precision).
+fn on_lattice(y: &[f64], step: f64, offset: f64) -> bool {
+    step > 0.0
+        && y.iter().filter(|v| v.is_finite()).all(|v| {
+            let k = (v - offset) / step;
+            (k - k.round()).abs() < 1e-6
+        })
 }
 
 /// `y` read `shift` samples later (`y(t + shift dt)`, linear between samples; NaN beyond
@@ -368,5 +382,24 @@ mod tests {
             assert!((s.readings[k] - model_out[k]).abs() < 1e-9, "{k}");
         }
         assert!(s.sigma > 0.03);
+    }
+
+    #[test]
+    fn a_quantisers_reading_noise_adds_the_channels_noise_only_off_its_lattice() {
+        let step = 0.5;
+        let model_out: Vec<f64> = (0..50).map(|k| 3.0 * (k as f64 * 0.3).sin()).collect();
+        let on: Vec<f64> = model_out.iter().map(|v| step * (v / step).round()).collect();
+        let off: Vec<f64> = on
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v + 0.1 * (k as f64 * 1.7).sin())
+            .collect();
+        // Step, noise before the quantiser, threshold, lattice offset.
+        let quantiser = [(GenericKind::Quantisation, vec![step, 0.03, 0.0, 0.0])];
+        let rounding = step * step / 12.0;
+        let s = ChannelSensor::new(&on, 0.1, 0.1, &quantiser);
+        assert!((s.sigma - (0.03f64.powi(2) + rounding).sqrt()).abs() < 1e-12);
+        let s = ChannelSensor::new(&off, 0.1, 0.1, &quantiser);
+        assert!((s.sigma - (0.03f64.powi(2) + rounding + 0.01).sqrt()).abs() < 1e-12);
     }
 }
