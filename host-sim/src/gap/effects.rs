@@ -13,7 +13,7 @@
 use crate::gap::estimate::{ChannelSensor, Estimates, Sensors};
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use crate::gap::start::{StartSensitivity, refit_start, start_sensitivities};
-use crate::gap::stats::{chi2_sf, holm, variance_ratio_p};
+use crate::gap::stats::{chi2_sf, holm, ljung_box, variance_ratio_p};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
 use serde::Serialize;
@@ -41,6 +41,9 @@ enum NoisySensor {
         noise: f64,
         channel_variance: f64,
     },
+    /// The innovations' variance of a first-order lag that the noise passed through (see
+    /// [`Problem::noise_through_lag`]).
+    LaggedNoise { innovation_variance: f64 },
 }
 
 impl NoisySensorReplay {
@@ -62,6 +65,9 @@ impl NoisySensorReplay {
             } => dead_zone_moments(v, width, shift, noise)
                 .1
                 .max(channel_variance),
+            NoisySensor::LaggedNoise {
+                innovation_variance,
+            } => innovation_variance,
         }
     }
 }
@@ -436,6 +442,13 @@ const ZEROS_OF_A_DEADBAND: usize = 10;
 
 /// The index of a quantiser's noise before it among its parameters.
 const QUANTISER_NOISE: usize = 1;
+
+/// Lags of the Ljung-Box tests that tell noise read through a fitted lag from noise after
+/// it ([`Problem::noise_through_lag`]).
+const LAG_WHITENESS_LAGS: usize = 10;
+
+/// Ljung-Box p-value below which a residual is not white ([`Problem::noise_through_lag`]).
+const LAG_WHITENESS_P: f64 = 0.01;
 
 /// Whether a fitted component at `values` is a [`NoisySensorReplay`]'s sensor: a quantiser
 /// or a dead zone, with noise before it (without, it is a static map read with the
@@ -1362,6 +1375,53 @@ impl<'a> Problem<'a> {
         })
     }
 
+    /// Where the sensor noise of channel `c` went through a first-order lag fitted among
+    /// `fitted` (a sensor's filter on its noisy signal, `y = lag(x + e)`), the one-step
+    /// predictions of the readings and their innovations' variance on the training samples;
+    /// `None` where it did not. Through the lag the noise is low-passed: the replay's
+    /// residual `r` keeps its sign from sample to sample and its variance is not the
+    /// channel's, so no test on it per sample holds; its innovations
+    /// `r_k - (1 - alpha) r_(k-1)` are the noise itself, white, and the one-step predictions
+    /// `replay_k + (1 - alpha) r_(k-1)` leave exactly them. Taken only where the residual is
+    /// not white and its innovations are (Ljung-Box over [`LAG_WHITENESS_LAGS`] lags at
+    /// [`LAG_WHITENESS_P`]): with the noise after the lag the innovations alternate, and a
+    /// slow gap the lag misses keeps its sign in them too.
+    fn noise_through_lag(
+        &self,
+        sim: &Simulation,
+        fitted: &[(Component, Vec<f64>)],
+        c: usize,
+    ) -> Option<(Vec<f64>, f64)> {
+        let tau = fitted.iter().find_map(|(comp, v)| match comp {
+            Component::Generic(GenericKind::FirstOrderLag, ch) if *ch == c => v.first().copied(),
+            _ => None,
+        })?;
+        let keep = (-self.data.dt / tau.max(1e-12)).exp();
+        let (y, m) = (&self.measured[c], &sim.outputs[c]);
+        let r: Vec<f64> = y.iter().zip(m).map(|(y, m)| y - m).collect();
+        let (mut residual, mut innovations) = (Vec::new(), Vec::new());
+        for k in 1..r.len() {
+            if self.train[k] && self.train[k - 1] && r[k].is_finite() && r[k - 1].is_finite() {
+                residual.push(r[k]);
+                innovations.push(r[k] - keep * r[k - 1]);
+            }
+        }
+        if innovations.len() <= 4 * LAG_WHITENESS_LAGS
+            || ljung_box(&residual, LAG_WHITENESS_LAGS).1 >= LAG_WHITENESS_P
+            || ljung_box(&innovations, LAG_WHITENESS_LAGS).1 < LAG_WHITENESS_P
+        {
+            return None;
+        }
+        let variance = innovations.iter().map(|v| v * v).sum::<f64>() / innovations.len() as f64;
+        let predictions = (0..r.len())
+            .map(|k| match k.checked_sub(1).map(|j| r[j]) {
+                Some(previous) if previous.is_finite() => m[k] + keep * previous,
+                _ => m[k],
+            })
+            .collect();
+        Some((predictions, variance))
+    }
+
     /// Per channel, the reading variance per sample that a noisy sensor among `fitted`
     /// predicts ([`NoisySensorReplay::variance`], floored at half the noise variance):
     /// between a quantiser's thresholds the reading is certain, on one it is a coin flip
@@ -1544,15 +1604,37 @@ impl<'a> Problem<'a> {
             return None;
         }
         let fitted = assemble(components, &dims, &theta);
-        let sim = self.predict(&fitted).ok()?;
+        let mut sim = self.predict(&fitted).ok()?;
         let before = self.gap(&self.nominal);
         // One replay without each noisy sensor, shared by the gap and the score.
-        let sensors = self.noisy_sensors(&fitted);
+        let mut sensors = self.noisy_sensors(&fitted);
+        // A lag the noise went through too is read as its one-step predictions, their
+        // innovation variance a fitted parameter.
+        let mut lagged_noise = 0;
+        for c in 0..sensors.len() {
+            if sensors[c].is_some() {
+                continue;
+            }
+            if let Some((predictions, innovation_variance)) =
+                self.noise_through_lag(&sim, &fitted, c)
+            {
+                sensors[c] = Some(NoisySensorReplay {
+                    sensor: NoisySensor::LaggedNoise {
+                        innovation_variance,
+                    },
+                    input: vec![0.0; predictions.len()],
+                });
+                sim.outputs[c] = predictions;
+                sim.innovations = true;
+                lagged_noise += 1;
+            }
+        }
         let after = self.gap_of(&sim, &sensors);
         let predicted = self.predicted_variances(&sensors, &sim);
         let nominal_score = self.held_out_score(&self.nominal, 0, &[]);
-        // A spread's noise level is fitted too (see `noise_beside_spread`).
-        let spread = sim.variances.iter().filter(|v| v.is_some()).count();
+        // A spread's noise level is fitted too (see `noise_beside_spread`), as is the
+        // innovation variance of noise through a lag.
+        let spread = sim.variances.iter().filter(|v| v.is_some()).count() + lagged_noise;
         let absolute = self.held_out_score(&sim, dims.len() - held + spread, &predicted);
         let names: Vec<String> = components.iter().map(|c| self.component_name(c)).collect();
         Some(Evaluation {

@@ -61,7 +61,11 @@ impl ChannelSensor {
                     // Readings off its lattice carry the channel's noise after it too.
                     let before = values.get(1).copied().unwrap_or(sigma);
                     let offset = values.get(3).copied().unwrap_or(0.0);
-                    let after = if on_lattice(measured, p, offset) { 0.0 } else { sigma };
+                    let after = if on_lattice(measured, p, offset) {
+                        0.0
+                    } else {
+                        sigma
+                    };
                     sigma = (before * before + p * p / 12.0 + after * after).sqrt();
                     // Thresholds above round-to-nearest lower the mean reading.
                     let threshold = values.get(2).copied().unwrap_or(0.0);
@@ -388,7 +392,10 @@ mod tests {
     fn a_quantisers_reading_noise_adds_the_channels_noise_only_off_its_lattice() {
         let step = 0.5;
         let model_out: Vec<f64> = (0..50).map(|k| 3.0 * (k as f64 * 0.3).sin()).collect();
-        let on: Vec<f64> = model_out.iter().map(|v| step * (v / step).round()).collect();
+        let on: Vec<f64> = model_out
+            .iter()
+            .map(|v| step * (v / step).round())
+            .collect();
         let off: Vec<f64> = on
             .iter()
             .enumerate()
