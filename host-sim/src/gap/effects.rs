@@ -1611,14 +1611,14 @@ impl<'a> Problem<'a> {
         // A lag the noise went through too is read as its one-step predictions, their
         // innovation variance a fitted parameter.
         let mut lagged_noise = 0;
-        for c in 0..sensors.len() {
-            if sensors[c].is_some() {
+        for (c, sensor) in sensors.iter_mut().enumerate() {
+            if sensor.is_some() {
                 continue;
             }
             if let Some((predictions, innovation_variance)) =
                 self.noise_through_lag(&sim, &fitted, c)
             {
-                sensors[c] = Some(NoisySensorReplay {
+                *sensor = Some(NoisySensorReplay {
                     sensor: NoisySensor::LaggedNoise {
                         innovation_variance,
                     },
