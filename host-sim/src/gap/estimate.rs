@@ -89,14 +89,18 @@ impl ChannelSensor {
     }
 }
 
-/// Whether every finite reading of `y` lies on the lattice `offset + k step` (to float
-/// precision).
+/// Whether the finite readings of `y` lie on the lattice `offset + k step` (to float
+/// precision; at least 90 % of them, as `effects::lattice_step` accepts a lattice).
 fn on_lattice(y: &[f64], step: f64, offset: f64) -> bool {
-    step > 0.0
-        && y.iter().filter(|v| v.is_finite()).all(|v| {
-            let k = (v - offset) / step;
+    let finite = y.iter().filter(|v| v.is_finite());
+    let on = finite
+        .clone()
+        .filter(|v| {
+            let k = (*v - offset) / step;
             (k - k.round()).abs() < 1e-6
         })
+        .count();
+    step > 0.0 && on as f64 >= 0.9 * finite.count() as f64
 }
 
 /// `y` read `shift` samples later (`y(t + shift dt)`, linear between samples; NaN beyond
