@@ -21,18 +21,19 @@ use std::collections::BTreeMap;
 
 /// A fitted sensor on one channel whose reading scatters around its mean by more than the
 /// noise in places (a quantiser near a threshold, a dead zone with noise before it near its
-/// edge), with its input: the candidate's replay of that channel without it.
-pub struct NoisySensorReplay {
-    sensor: NoisySensor,
-    input: Vec<f64>,
-}
-
-/// The sensors of [`NoisySensorReplay`] with the parameters their reading variance needs.
-enum NoisySensor {
+/// edge), with the parameters its reading variance needs and its input: the candidate's
+/// replay of that channel without it. Or the noise through a fitted lag, whose innovations
+/// have one variance.
+pub enum NoisySensorReplay {
     /// Step, noise before it and the variance of the noise after it (none on a lattice);
     /// the input is shifted so that it rounds to the nearest multiple of the step (see
     /// [`GenericKind::Quantisation`]).
-    Quantiser { step: f64, noise: f64, after: f64 },
+    Quantiser {
+        step: f64,
+        noise: f64,
+        after: f64,
+        input: Vec<f64>,
+    },
     /// Width, shift and noise before it (see [`GenericKind::DeadZone`]), and the channel's
     /// noise variance.
     DeadZone {
@@ -40,6 +41,7 @@ enum NoisySensor {
         shift: f64,
         noise: f64,
         channel_variance: f64,
+        input: Vec<f64>,
     },
     /// The innovations' variance of a first-order lag that the noise passed through (see
     /// [`Problem::noise_through_lag`]).
@@ -49,25 +51,29 @@ enum NoisySensor {
 impl NoisySensorReplay {
     /// The reading's variance at sample `k` ([`quantised_variance`], [`dead_zone_moments`]).
     pub fn variance(&self, k: usize) -> f64 {
-        let v = self.input.get(k).copied().unwrap_or(f64::NAN);
-        match self.sensor {
-            NoisySensor::Quantiser { step, noise, after } => {
-                quantised_variance(v, step, noise) + after
-            }
+        let at = |input: &[f64]| input.get(k).copied().unwrap_or(f64::NAN);
+        match self {
+            Self::Quantiser {
+                step,
+                noise,
+                after,
+                input,
+            } => quantised_variance(at(input), *step, *noise) + after,
             // No less than the channel's noise: a dead zone may explain jumps at its edge,
             // but not readings quieter than the noise (a noise-free record's hard stop at 0,
             // progpy's closed valve, read as a zeroing deadband).
-            NoisySensor::DeadZone {
+            Self::DeadZone {
                 width,
                 shift,
                 noise,
                 channel_variance,
-            } => dead_zone_moments(v, width, shift, noise)
+                input,
+            } => dead_zone_moments(at(input), *width, *shift, *noise)
                 .1
-                .max(channel_variance),
-            NoisySensor::LaggedNoise {
+                .max(*channel_variance),
+            Self::LaggedNoise {
                 innovation_variance,
-            } => innovation_variance,
+            } => *innovation_variance,
         }
     }
 }
@@ -957,7 +963,13 @@ impl<'a> Problem<'a> {
                         _ => None,
                     })
                     .collect();
-                ChannelSensor::new(&self.measured[ch], self.sigma[ch], self.data.dt, &effects)
+                ChannelSensor::new(
+                    &self.measured[ch],
+                    self.sigma[ch],
+                    self.data.dt,
+                    &effects,
+                    self.lattices[ch].is_some(),
+                )
             })
             .collect();
         self.plant
@@ -1335,28 +1347,6 @@ impl<'a> Problem<'a> {
             return None;
         };
         let v = self.with_lattice(*kind, c, v);
-        let (sensor, shift) = match kind {
-            GenericKind::Quantisation => (
-                NoisySensor::Quantiser {
-                    step: v[0],
-                    noise: v[1],
-                    after: match self.lattices[c] {
-                        Some(_) => 0.0,
-                        None => self.sigma[c] * self.sigma[c],
-                    },
-                },
-                quantiser_shift(&v),
-            ),
-            _ => (
-                NoisySensor::DeadZone {
-                    width: v[0],
-                    shift: v.get(1).copied().unwrap_or(1.0),
-                    noise: v.get(2).copied().unwrap_or(0.0),
-                    channel_variance: self.sigma[c] * self.sigma[c],
-                },
-                0.0,
-            ),
-        };
         let others: Vec<(Component, Vec<f64>)> = fitted
             .iter()
             .enumerate()
@@ -1369,9 +1359,26 @@ impl<'a> Problem<'a> {
         } else {
             self.predict(&others).ok()?.outputs.get(c)?.clone()
         };
-        Some(NoisySensorReplay {
-            sensor,
-            input: input.iter().map(|v| v - shift).collect(),
+        Some(match kind {
+            GenericKind::Quantisation => {
+                let shift = quantiser_shift(&v);
+                NoisySensorReplay::Quantiser {
+                    step: v[0],
+                    noise: v[1],
+                    after: match self.lattices[c] {
+                        Some(_) => 0.0,
+                        None => self.sigma[c] * self.sigma[c],
+                    },
+                    input: input.iter().map(|y| y - shift).collect(),
+                }
+            }
+            _ => NoisySensorReplay::DeadZone {
+                width: v[0],
+                shift: v.get(1).copied().unwrap_or(1.0),
+                noise: v.get(2).copied().unwrap_or(0.0),
+                channel_variance: self.sigma[c] * self.sigma[c],
+                input,
+            },
         })
     }
 
@@ -1439,7 +1446,7 @@ impl<'a> Problem<'a> {
                 let s2 = self.sigma[c] * self.sigma[c];
                 let added = added_variance(sim, c);
                 let base: Vec<f64> = match sensors.get(c).and_then(Option::as_ref) {
-                    Some(sensor) => (0..sensor.input.len())
+                    Some(sensor) => (0..self.measured[c].len())
                         .map(|k| sensor.variance(k).max(0.5 * s2))
                         .collect(),
                     None => vec![self.noise_beside_spread(sim, c)?; added?.len()],
@@ -1618,11 +1625,8 @@ impl<'a> Problem<'a> {
             if let Some((predictions, innovation_variance)) =
                 self.noise_through_lag(&sim, &fitted, c)
             {
-                *sensor = Some(NoisySensorReplay {
-                    sensor: NoisySensor::LaggedNoise {
-                        innovation_variance,
-                    },
-                    input: vec![0.0; predictions.len()],
+                *sensor = Some(NoisySensorReplay::LaggedNoise {
+                    innovation_variance,
                 });
                 sim.outputs[c] = predictions;
                 sim.innovations = true;

@@ -40,8 +40,16 @@ impl ChannelSensor {
 
     /// The channel as a sensor with `effects` (generic kind and its fitted values) reads
     /// `measured`, sampled every `dt`, with noise std `sigma` (a quantiser's values: step,
-    /// noise before it, threshold, lattice offset).
-    pub fn new(measured: &[f64], sigma: f64, dt: f64, effects: &[(GenericKind, Vec<f64>)]) -> Self {
+    /// noise before it, threshold, lattice offset). `on_lattice`: the readings lie on a
+    /// quantiser's lattice ([`crate::gap::effects::Problem::lattices`]), so no noise came
+    /// after it.
+    pub fn new(
+        measured: &[f64],
+        sigma: f64,
+        dt: f64,
+        effects: &[(GenericKind, Vec<f64>)],
+        on_lattice: bool,
+    ) -> Self {
         let mut readings = measured.to_vec();
         let mut sigma = sigma;
         let mut maps = Vec::new();
@@ -60,12 +68,7 @@ impl ChannelSensor {
                     // staircase of its mean the sigma points would see steps, not a slope.
                     // Readings off its lattice carry the channel's noise after it too.
                     let before = values.get(1).copied().unwrap_or(sigma);
-                    let offset = values.get(3).copied().unwrap_or(0.0);
-                    let after = if on_lattice(measured, p, offset) {
-                        0.0
-                    } else {
-                        sigma
-                    };
+                    let after = if on_lattice { 0.0 } else { sigma };
                     sigma = (before * before + p * p / 12.0 + after * after).sqrt();
                     // Thresholds above round-to-nearest lower the mean reading.
                     let threshold = values.get(2).copied().unwrap_or(0.0);
@@ -87,20 +90,6 @@ impl ChannelSensor {
             kind.static_reading(values, y).unwrap_or(y)
         })
     }
-}
-
-/// Whether the finite readings of `y` lie on the lattice `offset + k step` (to float
-/// precision; at least 90 % of them, as `effects::lattice_step` accepts a lattice).
-fn on_lattice(y: &[f64], step: f64, offset: f64) -> bool {
-    let finite = y.iter().filter(|v| v.is_finite());
-    let on = finite
-        .clone()
-        .filter(|v| {
-            let k = (*v - offset) / step;
-            (k - k.round()).abs() < 1e-6
-        })
-        .count();
-    step > 0.0 && on as f64 >= 0.9 * finite.count() as f64
 }
 
 /// `y` read `shift` samples later (`y(t + shift dt)`, linear between samples; NaN beyond
@@ -307,7 +296,7 @@ mod tests {
             .map(|(k, v)| v + 0.05 * ((k * 7919 % 13) as f64 / 6.0 - 1.0))
             .collect();
         let sensors = Sensors {
-            channels: vec![ChannelSensor::new(&measured, 0.05, 0.1, &[])],
+            channels: vec![ChannelSensor::new(&measured, 0.05, 0.1, &[], false)],
         };
         let setup = FilterSetup {
             x0: Vector2::new(measured[0], 0.0),
@@ -362,6 +351,7 @@ mod tests {
                 (GenericKind::SensorBias, vec![0.2]),
                 (GenericKind::OutputSaturation, vec![0.9]),
             ],
+            false,
         );
         assert_eq!(static_sensor.read(1.0), 0.9);
         assert!((static_sensor.read(0.1) - 0.3).abs() < 1e-12);
@@ -372,6 +362,7 @@ mod tests {
             0.01,
             dt,
             &[(GenericKind::MeasurementDelay, vec![0.25])],
+            false,
         );
         for k in 3..45 {
             // Linear interpolation twice (the delay's, then its undoing) is off by the
@@ -385,6 +376,7 @@ mod tests {
             0.01,
             dt,
             &[(GenericKind::FirstOrderLag, vec![0.3])],
+            false,
         );
         for k in 1..50 {
             assert!((s.readings[k] - model_out[k]).abs() < 1e-9, "{k}");
@@ -408,9 +400,9 @@ mod tests {
         // Step, noise before the quantiser, threshold, lattice offset.
         let quantiser = [(GenericKind::Quantisation, vec![step, 0.03, 0.0, 0.0])];
         let rounding = step * step / 12.0;
-        let s = ChannelSensor::new(&on, 0.1, 0.1, &quantiser);
+        let s = ChannelSensor::new(&on, 0.1, 0.1, &quantiser, true);
         assert!((s.sigma - (0.03f64.powi(2) + rounding).sqrt()).abs() < 1e-12);
-        let s = ChannelSensor::new(&off, 0.1, 0.1, &quantiser);
+        let s = ChannelSensor::new(&off, 0.1, 0.1, &quantiser, false);
         assert!((s.sigma - (0.03f64.powi(2) + rounding + 0.01).sqrt()).abs() < 1e-12);
     }
 }

@@ -571,7 +571,7 @@ mod tests {
                 .iter()
                 .map(|v| v + sigma[c] * standard_normal::<f64, _>(&mut rng))
                 .collect();
-            channels.push(ChannelSensor::new(&y, sigma[c], dt, &[]));
+            channels.push(ChannelSensor::new(&y, sigma[c], dt, &[], false));
             data.outputs.insert(name.into(), y);
         }
         (data, truth.states, Sensors { channels })

@@ -1302,7 +1302,7 @@ mod tests {
                 .iter()
                 .map(|v| v + sigma[c] * standard_normal::<f64, _>(&mut rng))
                 .collect();
-            channels.push(ChannelSensor::new(&y, sigma[c], data.dt, &[]));
+            channels.push(ChannelSensor::new(&y, sigma[c], data.dt, &[], false));
             data.outputs.insert(name.into(), y);
         }
         let mut params = WheelGapPlant.default_params();
