@@ -952,13 +952,28 @@ impl<'a> Problem<'a> {
         fitted: &[(Component, Vec<f64>)],
     ) -> Option<Result<Estimates, String>> {
         let (params, active) = self.model_with(fitted);
+        // A lag's replay tells whether the noise went through it.
+        let has_lag = fitted
+            .iter()
+            .any(|(c, _)| matches!(c, Component::Generic(GenericKind::FirstOrderLag, _)));
+        let replay = if has_lag {
+            self.predict(fitted).ok()
+        } else {
+            None
+        };
         let channels = (0..self.outputs.len())
             .map(|ch| {
                 let effects: Vec<(GenericKind, Vec<f64>)> = fitted
                     .iter()
                     .filter_map(|(c, v)| match c {
                         Component::Generic(kind, c) if *c == ch => {
-                            Some((*kind, self.with_lattice(*kind, ch, v)))
+                            let mut values = self.with_lattice(*kind, ch, v);
+                            if let (GenericKind::FirstOrderLag, Some(sim)) = (kind, &replay)
+                                && let Some(before) = self.noise_before_lag(sim, fitted, ch)
+                            {
+                                values.push(before);
+                            }
+                            Some((*kind, values))
                         }
                         _ => None,
                     })
@@ -1427,6 +1442,26 @@ impl<'a> Problem<'a> {
             })
             .collect();
         Some((predictions, variance))
+    }
+
+    /// Where the sensor noise of channel `c` went through a lag fitted among `fitted`
+    /// ([`Problem::noise_through_lag`] on its replay `sim`), the std of that noise, before
+    /// the lag: undoing the lag leaves it, white, where the lag filtered only the noise
+    /// after it the undoing amplifies that.
+    fn noise_before_lag(
+        &self,
+        sim: &Simulation,
+        fitted: &[(Component, Vec<f64>)],
+        c: usize,
+    ) -> Option<f64> {
+        let tau = fitted.iter().find_map(|(comp, v)| match comp {
+            Component::Generic(GenericKind::FirstOrderLag, ch) if *ch == c => v.first().copied(),
+            _ => None,
+        })?;
+        let (_, innovation_variance) = self.noise_through_lag(sim, fitted, c)?;
+        // The innovations are the noise before the lag times alpha.
+        let alpha = 1.0 - (-self.data.dt / tau.max(1e-12)).exp();
+        Some(innovation_variance.sqrt() / alpha.max(1e-12))
     }
 
     /// Per channel, the reading variance per sample that a noisy sensor among `fitted`

@@ -40,7 +40,8 @@ impl ChannelSensor {
 
     /// The channel as a sensor with `effects` (generic kind and its fitted values) reads
     /// `measured`, sampled every `dt`, with noise std `sigma` (a quantiser's values: step,
-    /// noise before it, threshold, lattice offset). `on_lattice`: the readings lie on a
+    /// noise before it, threshold, lattice offset; a lag's: time constant and, where the
+    /// noise went through it, the noise std before it). `on_lattice`: the readings lie on a
     /// quantiser's lattice ([`crate::gap::effects::Problem::lattices`]), so no noise came
     /// after it.
     pub fn new(
@@ -60,7 +61,12 @@ impl ChannelSensor {
                 GenericKind::FirstOrderLag => {
                     let alpha = 1.0 - (-dt / p.max(1e-12)).exp();
                     readings = unlagged(&readings, alpha);
-                    sigma *= (1.0 + (1.0 - alpha).powi(2)).sqrt() / alpha.max(1e-12);
+                    // Undone, noise that went through the lag is the noise before it
+                    // (the values' second, where given); noise after it is amplified.
+                    sigma = match values.get(1) {
+                        Some(&before) => before,
+                        None => sigma * (1.0 + (1.0 - alpha).powi(2)).sqrt() / alpha.max(1e-12),
+                    };
                 }
                 GenericKind::Quantisation => {
                     // Read as the model's output plus rounding noise of variance
@@ -382,6 +388,15 @@ mod tests {
             assert!((s.readings[k] - model_out[k]).abs() < 1e-9, "{k}");
         }
         assert!(s.sigma > 0.03);
+        // Noise that went through the lag is, undone, the noise before it.
+        let s = ChannelSensor::new(
+            &lagged,
+            0.01,
+            dt,
+            &[(GenericKind::FirstOrderLag, vec![0.3, 0.02])],
+            false,
+        );
+        assert_eq!(s.sigma, 0.02);
     }
 
     #[test]
