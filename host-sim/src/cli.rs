@@ -194,6 +194,11 @@ pub enum Command {
         /// Scale the sample time by this factor (records keep their duration).
         #[arg(long, default_value_t = 1.0, value_parser = positive_number)]
         sample_time_scale: f64,
+        /// Distribution of every sensor's noise (its std unchanged): `gaussian`, or
+        /// `uniform`, `laplace`, `student-t5` (heavy tails) and `ar1` (correlated, 0.5)
+        /// to see how far the diagnoser's white Gaussian noise model carries.
+        #[arg(long, value_enum, default_value_t = crate::gap::bench::NoiseShape::Gaussian)]
+        noise_shape: crate::gap::bench::NoiseShape,
         /// How the written rows relate inputs and samples: `before` (the row's input acts
         /// after its sample), `at` (outputs that follow the input at once show it) or
         /// `after` (the row's input acted over the step ending at its sample) [default:
@@ -541,6 +546,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
             model_spread,
             noise_scale,
             sample_time_scale,
+            noise_shape,
             input_timing,
             truth_columns,
             datasets,
@@ -560,6 +566,7 @@ pub fn execute(registry: &Registry, command: Command) -> Result<(), SimError> {
                 sample_time_scale,
                 input_timing,
                 truth_columns,
+                noise_shape,
             };
             let started = Instant::now();
             let (_, text) = crate::gap::bench::run_bench(

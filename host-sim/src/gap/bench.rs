@@ -285,6 +285,8 @@ pub struct BenchOptions {
     /// Write the truth plant's states as `x:<name>` columns (the diagnosis then reports the
     /// estimator's error before and after, and the bench its median ratio).
     pub truth_columns: bool,
+    /// The distribution of every sensor's noise (its std as without).
+    pub noise_shape: NoiseShape,
 }
 
 /// What a bench plant varies from the bench's defaults.
@@ -296,6 +298,7 @@ struct Variation {
     sample_time_scale: f64,
     input_timing: Option<InputTiming>,
     truth_columns: bool,
+    noise_shape: NoiseShape,
 }
 
 impl Default for Variation {
@@ -307,6 +310,7 @@ impl Default for Variation {
             sample_time_scale: 1.0,
             input_timing: None,
             truth_columns: false,
+            noise_shape: NoiseShape::Gaussian,
         }
     }
 }
@@ -326,6 +330,46 @@ pub enum Excitation {
     /// Piecewise-linear commands between random levels over random durations (valve: holds
     /// of 2-10 s and a supply pressure ramping between levels).
     Ramps,
+}
+
+/// The distribution of the bench's sensor noise, each of unit variance before it is
+/// scaled to the channel's std. The diagnoser's tests assume white Gaussian noise; the
+/// others check how far that assumption carries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum NoiseShape {
+    /// White Gaussian (the bench's default).
+    #[default]
+    Gaussian,
+    /// White, uniform on `+-sqrt(3)` (light tails, as a converter's dither).
+    Uniform,
+    /// White Laplace (excess kurtosis 3).
+    Laplace,
+    /// White Student-t with 5 degrees of freedom (excess kurtosis 6: occasional large
+    /// readings).
+    StudentT5,
+    /// Gaussian, correlated from sample to sample: AR(1) with coefficient 0.5.
+    Ar1,
+}
+
+impl NoiseShape {
+    /// The next noise sample; `previous` is the channel's last one (AR(1) only).
+    fn sample(self, rng: &mut SimRng, previous: f64) -> f64 {
+        match self {
+            Self::Gaussian => standard_normal(rng),
+            Self::Uniform => 12f64.sqrt() * (uniform(rng) - 0.5),
+            Self::Laplace => {
+                // Inverse CDF of scale 1/sqrt(2); `ln` of (0, 1] stays finite.
+                let u = uniform(rng) - 0.5;
+                -(0.5f64).sqrt() * u.signum() * (1.0 - 2.0 * u.abs()).max(f64::MIN_POSITIVE).ln()
+            }
+            Self::StudentT5 => {
+                let z = standard_normal(rng);
+                let chi2: f64 = (0..5).map(|_| standard_normal(rng).powi(2)).sum();
+                z / (chi2 / 5.0).sqrt() * (3.0f64 / 5.0).sqrt()
+            }
+            Self::Ar1 => 0.5 * previous + 0.75f64.sqrt() * standard_normal(rng),
+        }
+    }
 }
 
 /// Piecewise-linear through random levels in `mean +- amplitude`, one knot every
@@ -403,6 +447,7 @@ impl Default for BenchOptions {
             sample_time_scale: 1.0,
             input_timing: None,
             truth_columns: false,
+            noise_shape: NoiseShape::Gaussian,
         }
     }
 }
@@ -1125,9 +1170,12 @@ fn noisy(bp: &dyn BenchPlant, clean: &Clean, spec: &Spec, seed: u64) -> Vec<Vec<
     for &(kind, ch, p) in &spec.generic {
         out[ch] = apply_generic(kind, p, &out[ch], bp.dt());
     }
+    let shape = bp.variation().noise_shape;
     for (c, y) in out.iter_mut().enumerate() {
+        let mut previous = 0.0;
         for v in y.iter_mut() {
-            *v += sigma[c] * standard_normal(&mut rng);
+            previous = shape.sample(&mut rng, previous);
+            *v += sigma[c] * previous;
         }
     }
     for &(kind, ch, p) in &spec.generic {
@@ -1413,6 +1461,7 @@ pub fn generate(plant: &str, opts: &BenchOptions) -> Result<Vec<Dataset>, SimErr
         sample_time_scale: opts.sample_time_scale,
         input_timing: opts.input_timing,
         truth_columns: opts.truth_columns,
+        noise_shape: opts.noise_shape,
     };
     let bp = bench_plant(plant, vary)
         .ok_or_else(|| SimError::Run(format!("gap-bench has no generator for plant `{plant}`")))?;
@@ -2184,6 +2233,49 @@ pub fn run_bench(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_noise_shape_has_unit_variance_and_its_own_tails_and_correlation() {
+        // (shape, share of samples beyond 3 std, lag-1 correlation); a share rather
+        // than the kurtosis, whose estimate the t5's rare extremes dominate.
+        let expected = [
+            (NoiseShape::Gaussian, 0.0027, 0.0),
+            (NoiseShape::Uniform, 0.0, 0.0),
+            (NoiseShape::Laplace, 0.01437, 0.0),
+            (NoiseShape::StudentT5, 0.01172, 0.0),
+            (NoiseShape::Ar1, 0.0027, 0.5),
+        ];
+        for (shape, beyond_3, correlation) in expected {
+            let mut rng: SimRng = stream_rng(5, 13);
+            let mut previous = 0.0;
+            let e: Vec<f64> = (0..400_000)
+                .map(|_| {
+                    previous = shape.sample(&mut rng, previous);
+                    previous
+                })
+                .collect();
+            let n = e.len() as f64;
+            let mean = e.iter().sum::<f64>() / n;
+            let var = e.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+            let lag1 = e
+                .windows(2)
+                .map(|w| (w[0] - mean) * (w[1] - mean))
+                .sum::<f64>()
+                / n;
+            let share = e.iter().filter(|v| v.abs() > 3.0).count() as f64 / n;
+            assert!(mean.abs() < 0.01, "{shape:?} mean {mean}");
+            assert!((var - 1.0).abs() < 0.03, "{shape:?} variance {var}");
+            // Binomial std of the share: below 2e-4 at these counts.
+            assert!(
+                (share - beyond_3).abs() < 8e-4,
+                "{shape:?} beyond 3 std {share}"
+            );
+            assert!(
+                (lag1 / var - correlation).abs() < 0.01,
+                "{shape:?} lag 1 {lag1}"
+            );
+        }
+    }
 
     /// Per plant, a catalogue effect whose smallest bench magnitude leaves the truth as
     /// good as nominal.
