@@ -1445,9 +1445,9 @@ impl<'a> Problem<'a> {
     }
 
     /// Where the sensor noise of channel `c` went through a lag fitted among `fitted`
-    /// ([`Problem::noise_through_lag`] on its replay `sim`), the std of that noise, before
-    /// the lag: undoing the lag leaves it, white, where the lag filtered only the noise
-    /// after it the undoing amplifies that.
+    /// ([`Problem::noise_through_lag`] on its replay `sim`), the std of that noise before
+    /// the lag: undoing the lag leaves that noise, white (noise added after a lag is
+    /// amplified by the undoing instead).
     fn noise_before_lag(
         &self,
         sim: &Simulation,
