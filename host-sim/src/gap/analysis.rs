@@ -258,7 +258,7 @@ pub fn innovation_tests(problem: &Problem, innovations: &[Vec<f64>]) -> Estimato
             "nis",
             "all".into(),
             overall,
-            variance_ratio_p(overall, m_all as f64, dof),
+            variance_ratio_p(overall, problem.gaussian_samples(c, m_all), dof),
         );
         for r in &regimes {
             let (v, m) = nis(&|k| r.mask.get(k).copied().unwrap_or(false));
@@ -267,7 +267,7 @@ pub fn innovation_tests(problem: &Problem, innovations: &[Vec<f64>]) -> Estimato
                     "nis",
                     r.label.clone(),
                     v,
-                    variance_ratio_p(v, m as f64, dof),
+                    variance_ratio_p(v, problem.gaussian_samples(c, m), dof),
                 );
                 cells.push(Cell {
                     channel: channel.clone(),
@@ -336,7 +336,7 @@ pub fn analyse(problem: &Problem) -> WhereReport {
             "nis",
             "all".into(),
             overall,
-            variance_ratio_p(overall, m_all as f64, dof),
+            variance_ratio_p(overall, problem.gaussian_samples(c, m_all), dof),
         );
         let mut regime_excess: Vec<(String, f64, usize)> = Vec::new();
         for r in &regimes {
@@ -346,7 +346,7 @@ pub fn analyse(problem: &Problem) -> WhereReport {
                     "nis",
                     r.label.clone(),
                     v,
-                    variance_ratio_p(v, m as f64, dof),
+                    variance_ratio_p(v, problem.gaussian_samples(c, m), dof),
                 );
                 regime_excess.push((r.label.clone(), v, m));
                 cells.push(Cell {
@@ -369,7 +369,7 @@ pub fn analyse(problem: &Problem) -> WhereReport {
                 "nis",
                 format!("window [{:.3}, {:.3}]", span[0], span[1]),
                 v,
-                variance_ratio_p(v, m as f64, dof),
+                variance_ratio_p(v, problem.gaussian_samples(c, m), dof),
             );
             windows.push((span, v));
         }

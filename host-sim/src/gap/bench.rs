@@ -353,7 +353,7 @@ pub enum NoiseShape {
 
 impl NoiseShape {
     /// The next noise sample; `previous` is the channel's last one (AR(1) only).
-    fn sample(self, rng: &mut SimRng, previous: f64) -> f64 {
+    pub(crate) fn sample(self, rng: &mut SimRng, previous: f64) -> f64 {
         match self {
             Self::Gaussian => standard_normal(rng),
             Self::Uniform => 12f64.sqrt() * (uniform(rng) - 0.5),

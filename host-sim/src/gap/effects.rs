@@ -13,7 +13,7 @@
 use crate::gap::estimate::{ChannelSensor, Estimates, Sensors};
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use crate::gap::start::{StartSensitivity, refit_start, start_sensitivities};
-use crate::gap::stats::{chi2_sf, holm, ljung_box, variance_ratio_p};
+use crate::gap::stats::{chi2_sf, gaussian_equivalent_samples, holm, ljung_box, variance_ratio_p};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
 use serde::Serialize;
@@ -607,6 +607,9 @@ pub struct Problem<'a> {
     pub sigma: Vec<f64>,
     /// Effective degrees of freedom of each sigma (infinite when declared in meta).
     pub sigma_dof: Vec<f64>,
+    /// Kurtosis of each channel's noise: 3 (Gaussian) unless the diagnosis found its tails
+    /// heavier ([`crate::gap::stats::heavy_tailed_noise`]).
+    pub noise_kurtosis: Vec<f64>,
     /// Training samples.
     pub train: Vec<bool>,
     /// Held-out samples.
@@ -1190,7 +1193,7 @@ impl<'a> Problem<'a> {
                 if n > 0 {
                     p.push(variance_ratio_p(
                         acc / n as f64,
-                        n as f64,
+                        self.gaussian_samples(c, n),
                         self.sigma_dof[c],
                     ));
                 }
@@ -1204,10 +1207,17 @@ impl<'a> Problem<'a> {
         holm(&p).into_iter().fold(1.0, f64::min)
     }
 
+    /// How many Gaussian samples a mean of `n` squared standardised residuals of channel `c`
+    /// is worth (`n` unless its noise is heavy-tailed; see
+    /// [`crate::gap::stats::gaussian_equivalent_samples`]).
+    pub fn gaussian_samples(&self, c: usize, n: usize) -> f64 {
+        gaussian_equivalent_samples(n as f64, self.noise_kurtosis.get(c).copied().unwrap_or(3.0))
+    }
+
     /// The smallest held-out gap that noise cannot produce: three standard deviations of
     /// `sum_c (MSE_c / sigma_c^2 - 1)` when the model is right (each term has variance
-    /// `2 / n_c + 2 / dof_c`, the held-out count and the noise estimate's degrees of
-    /// freedom), as a gap (square root). Below it, a candidate's shrink is meaningless and
+    /// `2 / n_c + 2 / dof_c`, the held-out count (its Gaussian equivalent,
+    /// [`Problem::gaussian_samples`]) and the noise estimate's degrees of freedom), as a gap (square root). Below it, a candidate's shrink is meaningless and
     /// only its likelihood tells whether it explains something (an effect on the noise's
     /// distribution, such as a coarse quantiser, rather than on the mean).
     pub fn gap_resolution(&self) -> f64 {
@@ -1215,7 +1225,8 @@ impl<'a> Problem<'a> {
             .channel_rss(&self.nominal, &self.test)
             .iter()
             .zip(&self.sigma_dof)
-            .map(|((_, n), dof)| 2.0 / (*n).max(1) as f64 + 2.0 / dof)
+            .enumerate()
+            .map(|(c, ((_, n), dof))| 2.0 / self.gaussian_samples(c, (*n).max(1)) + 2.0 / dof)
             .sum();
         (3.0 * var.sqrt()).sqrt()
     }

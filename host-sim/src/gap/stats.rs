@@ -245,6 +245,82 @@ pub fn noise_std_from_differences(y: &[f64]) -> Option<(f64, f64)> {
     (sigma > 0.0).then_some((sigma, 0.95 * dof * kept / n))
 }
 
+/// Noise whose tails are heavier than a Gaussian's, as read off a residual by
+/// [`heavy_tailed_noise`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeavyTailedNoise {
+    /// Std.
+    pub std: f64,
+    /// Effective degrees of freedom of its variance (as in [`variance_ratio_p`]).
+    pub dof: f64,
+    /// Kurtosis `E e^4 / (E e^2)^2` (3 for a Gaussian).
+    pub kurtosis: f64,
+}
+
+/// How many Gaussian samples a mean of `n` squared standardised residuals of noise with
+/// `kurtosis` is worth: its relative variance is `(kurtosis - 1) / n` where a Gaussian's is
+/// `2 / n` (the `n` to give [`variance_ratio_p`]).
+pub fn gaussian_equivalent_samples(n: f64, kurtosis: f64) -> f64 {
+    n * 2.0 / (kurtosis - 1.0).max(2.0)
+}
+
+/// Largest kurtosis [`heavy_tailed_noise`] reports: beyond it a record's few extremes decide.
+pub const MAX_KURTOSIS: f64 = 30.0;
+
+/// The noise of `residual` (finite entries; the readings less a model's replay) when its
+/// tails are heavier than a Gaussian's, `None` when they are not told apart from one.
+///
+/// For white noise of variance `s^2` and kurtosis `k`, the lag product
+/// `P_k = -(r_k - r_{k-1}) (r_{k+1} - r_k)` has mean `s^2` and mean square `(k + 3) s^4`,
+/// so `mean P^2 / (mean P)^2 - 3` estimates `k`. What is left of a slow signal adds its
+/// slope's square, and a jump `J` adds `J` times the noise, not `J^4` as it would to a
+/// kurtosis of the differences; an isolated wild reading `A` adds `A^4`. On Gaussian noise
+/// the estimate spreads `16.5 / sqrt(n)` (simulated, 300 to 10 000 samples, skewed to the
+/// right); tails count as heavy beyond 4 of those. The variance is then the mean lag product
+/// (unbiased whatever the tails, where [`noise_std_from_differences`], trimmed and corrected
+/// for a Gaussian's truncation, gives 0.93 of the std on Laplace or Student-t5 noise), its
+/// degrees of freedom from the products' own spread (they correlate up to lag 2). Flags 95 %
+/// of Laplace and 92 % of Student-t5 records of 1800 samples, and no Gaussian one of 1000.
+pub fn heavy_tailed_noise(residual: &[f64]) -> Option<HeavyTailedNoise> {
+    let products: Vec<f64> = residual
+        .windows(3)
+        .filter(|w| w.iter().all(|v| v.is_finite()))
+        .map(|w| -(w[1] - w[0]) * (w[2] - w[1]))
+        .collect();
+    let n = products.len() as f64;
+    if products.len() < 30 {
+        return None;
+    }
+    let mean = products.iter().sum::<f64>() / n;
+    let mean_square = products.iter().map(|p| p * p).sum::<f64>() / n;
+    if mean <= 0.0 {
+        return None;
+    }
+    let kurtosis = mean_square / (mean * mean) - 3.0;
+    if kurtosis <= 3.0 + 4.0 * 16.5 / n.sqrt() {
+        return None;
+    }
+    let covariance = |lag: usize| {
+        products
+            .iter()
+            .zip(&products[lag..])
+            .map(|(a, b)| (a - mean) * (b - mean))
+            .sum::<f64>()
+            / n
+    };
+    let variance_of_mean = (covariance(0) + 2.0 * covariance(1) + 2.0 * covariance(2)) / n;
+    let dof = if variance_of_mean > 0.0 {
+        2.0 * mean * mean / variance_of_mean
+    } else {
+        n
+    };
+    Some(HeavyTailedNoise {
+        std: mean.sqrt(),
+        dof,
+        kurtosis: kurtosis.min(MAX_KURTOSIS),
+    })
+}
+
 /// Periodogram of `x` (mean removed) normalised so that white noise of unit variance has
 /// expected value 1 in every bin: `|X_k|^2 / n` for `k = 1..n/2`, with frequencies
 /// `k / (n dt)` (Hz).
@@ -407,6 +483,44 @@ mod tests {
                 spread < 1.25 * stated && spread > 0.75 * stated,
                 "{spread} vs {stated}"
             );
+        }
+    }
+
+    #[test]
+    fn heavy_tails_are_told_from_gaussian_noise_and_their_variance_is_not_trimmed_away() {
+        // 1000 records of 1800 samples on a slow sine, per shape: the share flagged heavy,
+        // the mean std reported when flagged, and the trimmed estimate's mean beside it.
+        use crate::gap::bench::NoiseShape;
+        let records = 1000;
+        for shape in [
+            NoiseShape::Gaussian,
+            NoiseShape::Laplace,
+            NoiseShape::StudentT5,
+        ] {
+            let mut rng = crate::lockstep::stream_rng(9, 1);
+            let (mut flagged, mut std_sum, mut trimmed_sum) = (0, 0.0, 0.0);
+            for _ in 0..records {
+                let x: Vec<f64> = (0..1800)
+                    .map(|k| shape.sample(&mut rng, 0.0) + 5.0 * (k as f64 * 3e-3).sin())
+                    .collect();
+                if let Some(tails) = heavy_tailed_noise(&x) {
+                    flagged += 1;
+                    std_sum += tails.std;
+                    trimmed_sum += noise_std_from_differences(&x).unwrap().0;
+                    assert!(tails.kurtosis > 3.0 && tails.dof > 20.0, "{tails:?}");
+                }
+            }
+            let share = flagged as f64 / records as f64;
+            let mean_std = std_sum / flagged.max(1) as f64;
+            let trimmed = trimmed_sum / flagged.max(1) as f64;
+            println!("{shape:?}: flagged {share}, std {mean_std:.4}, trimmed {trimmed:.4}");
+            if shape == NoiseShape::Gaussian {
+                assert!(share < 0.01, "{shape:?}: {share}");
+            } else {
+                assert!(share > 0.85, "{shape:?}: {share}");
+                assert!((mean_std - 1.0).abs() < 0.02, "{shape:?}: {mean_std}");
+                assert!(trimmed < 0.95, "{shape:?}: trimmed {trimmed}");
+            }
         }
     }
 
