@@ -8,6 +8,10 @@
 //! - `ljung_box`: residual whiteness (lags 1-20);
 //! - `input_xcorr`: residual-input cross-correlation (lags 0-10).
 //!
+//! `nis` counts a mean of `n` squared residuals as worth fewer samples when the noise is
+//! heavy-tailed or correlated ([`Problem::gaussian_samples`]); the last three whiten a
+//! correlated noise first (the spectrum is then the whitened residual's).
+//!
 //! Holm's step-down correction over all tests controls the family-wise false-alarm rate.
 //! The location reported is the channel with the largest excess residual, and within it the
 //! regime, window and band with the largest excess.
@@ -21,7 +25,9 @@
 
 use crate::gap::effects::Problem;
 use crate::gap::plant::Regime;
-use crate::gap::stats::{holm, ljung_box, normal_sf, periodogram, persistence, variance_ratio_p};
+use crate::gap::stats::{
+    ar1_whitened, holm, ljung_box, normal_sf, periodogram, persistence, variance_ratio_p,
+};
 use serde::Serialize;
 
 /// Family-wise false-alarm rate over all tests of one diagnosis.
@@ -377,6 +383,14 @@ pub fn analyse(problem: &Problem) -> WhereReport {
             .iter()
             .map(|v| if v.is_finite() { *v } else { 0.0 })
             .collect();
+        // Noise correlated from sample to sample is whitened first: its spectrum is not
+        // flat, nor its autocorrelation zero.
+        let phi = problem.noise_ar1[c];
+        let finite = if phi == 0.0 {
+            finite
+        } else {
+            ar1_whitened(&finite, phi)
+        };
         let (freqs, power) = periodogram(&finite, data.dt);
         let mut bands = Vec::new();
         if let (Some(&f_lo), Some(&f_hi)) = (freqs.first(), freqs.last()) {

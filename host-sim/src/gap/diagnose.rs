@@ -14,7 +14,8 @@ use crate::gap::plant::{
 };
 use crate::gap::start::start_sensitivities;
 use crate::gap::stats::{
-    heavy_tailed_noise, noise_std_from_differences, second_differences, without_repeated_levels,
+    ar1_from_differences, heavy_tailed_noise, noise_std_from_differences,
+    second_difference_variance, second_differences, without_repeated_levels,
 };
 use crate::gap::units::{Conversion, conversion};
 use rayon::prelude::*;
@@ -70,7 +71,10 @@ pub struct NoiseLevel {
     pub channel: String,
     /// Std (channel units).
     pub std: f64,
-    /// `meta` (declared in `[noise]`) or `differences` (estimated from the data).
+    /// `meta` (declared in `[noise]`), or estimated from the data: `differences` (the
+    /// readings' second differences), `lattice step` (the rounding of a quantiser with
+    /// less noise than its step), `residual differences` (the model residual's), and after
+    /// a repeat with noise of another shape `correlated residual` or `heavy-tailed residual`.
     pub source: &'static str,
 }
 
@@ -484,6 +488,7 @@ fn diagnose_timed(
         zeroed,
         measured,
         noise_kurtosis: vec![3.0; sigma.len()],
+        noise_ar1: vec![0.0; sigma.len()],
         sigma,
         sigma_dof,
         train: train.clone(),
@@ -544,16 +549,19 @@ fn diagnose_timed(
         }
     }
     if verdict == "unknown" {
-        // Every test assumes Gaussian noise: heavy tails (a sensor's occasional wild reading)
-        // make noise look like a gap that no effect explains. Asked only here, so that a
-        // gap that an effect explains is never weighed against a noise inflated by it (an
-        // effect's isolated spikes look like wild readings too).
+        // Every test assumes white Gaussian noise: heavy tails (a sensor's occasional wild
+        // reading) or noise correlated from sample to sample (a filtered sensor) make noise
+        // look like a gap that no effect explains. Asked only here, so that a gap that an
+        // effect explains is never weighed against a noise shaped by it (an effect's
+        // isolated spikes look like wild readings too).
         let mut notes = Vec::new();
-        if let Some((heavy, heavy_noise)) = with_heavy_tailed_noise(&problem, &noise, &mut notes) {
-            let heavy_report = analyse(&heavy);
-            let (v, r, p) = decide(&heavy, &heavy_report);
+        if let Some((shaped, shaped_noise)) =
+            with_noise_of_its_own_shape(&problem, &noise, &mut notes)
+        {
+            let shaped_report = analyse(&shaped);
+            let (v, r, p) = decide(&shaped, &shaped_report);
             if v != "unknown" {
-                (problem, noise, report) = (heavy, heavy_noise, heavy_report);
+                (problem, noise, report) = (shaped, shaped_noise, shaped_report);
                 (verdict, ranking, pairs) = (v, r, p);
                 warnings.extend(notes);
             }
@@ -887,18 +895,21 @@ fn still_lattice_step(y: &[f64]) -> Option<f64> {
     (2 * zero > d2.len()).then_some(q)
 }
 
-/// `problem` with the noise of every channel whose residual against the user's model shows
-/// tails heavier than a Gaussian's ([`heavy_tailed_noise`]) taken from that residual: its
-/// variance, degrees of freedom and kurtosis (a level declared in the meta file keeps its
-/// value and takes the kurtosis). Each level changed is noted in `noise` and `warnings`.
-/// `None` when no channel's tails are heavy. Channels on a lattice are left alone: their
+/// `problem` with the noise of every channel whose residual against the user's model is not
+/// white Gaussian noise taken from that residual: noise correlated from sample to sample
+/// ([`ar1_from_differences`]: its coefficient, and its std from the second differences'
+/// trimmed spread, which is `second_difference_variance(phi)` rather than 6 times the
+/// variance), or else with tails heavier than a Gaussian's ([`heavy_tailed_noise`]: its
+/// variance, degrees of freedom and kurtosis). A level declared in the meta file keeps its
+/// value and takes the shape. Each change is noted in `noise` and `notes`. `None` when every
+/// channel's noise looks white and Gaussian. Channels on a lattice are left alone: their
 /// residual is the rounding of a slowly moving signal, correlated from sample to sample.
-fn with_heavy_tailed_noise<'a>(
+fn with_noise_of_its_own_shape<'a>(
     problem: &Problem<'a>,
     noise: &[NoiseLevel],
-    warnings: &mut Vec<String>,
+    notes: &mut Vec<String>,
 ) -> Option<(Problem<'a>, Vec<NoiseLevel>)> {
-    let mut heavy = problem.clone();
+    let mut shaped = problem.clone();
     let mut levels = noise.to_vec();
     let mut changed = false;
     for (c, level) in levels.iter_mut().enumerate() {
@@ -911,27 +922,44 @@ fn with_heavy_tailed_noise<'a>(
             .zip(&problem.nominal.outputs[c])
             .map(|(y, m)| y - m)
             .collect();
-        let Some(tails) = heavy_tailed_noise(&residual) else {
+        let declared = level.source == "meta";
+        if let Some(phi) = ar1_from_differences(&residual) {
+            shaped.noise_ar1[c] = phi;
+            if !declared && let Some((white, dof)) = noise_std_from_differences(&residual) {
+                let std = white * (6.0 / second_difference_variance(phi)).sqrt();
+                shaped.sigma[c] = std;
+                shaped.sigma_dof[c] = dof;
+                level.std = std;
+                level.source = "correlated residual";
+            }
+            notes.push(format!(
+                "{}: the residual's noise is correlated from sample to sample (AR(1) \
+                 coefficient {phi:.2}); the tests were repeated with that noise (std {:.4}) as \
+                 no effect explained the gap under white noise",
+                level.channel, level.std
+            ));
+        } else if let Some(tails) = heavy_tailed_noise(&residual) {
+            shaped.noise_kurtosis[c] = tails.kurtosis;
+            if !declared {
+                shaped.sigma[c] = tails.std;
+                shaped.sigma_dof[c] = tails.dof;
+                level.std = tails.std;
+                level.source = "heavy-tailed residual";
+            }
+            notes.push(format!(
+                "{}: the residual's tails are heavier than a Gaussian's (noise kurtosis {:.1}); \
+                 the tests were repeated with that noise (std {:.4}) as no effect explained \
+                 the gap under Gaussian noise",
+                level.channel, tails.kurtosis, level.std
+            ));
+        } else {
             continue;
-        };
-        heavy.noise_kurtosis[c] = tails.kurtosis;
-        if level.source != "meta" {
-            heavy.sigma[c] = tails.std;
-            heavy.sigma_dof[c] = tails.dof;
-            level.std = tails.std;
-            level.source = "heavy-tailed residual";
         }
-        warnings.push(format!(
-            "{}: the residual's tails are heavier than a Gaussian's (noise kurtosis {:.1}); \
-             the tests were repeated with that noise (std {:.4}) as no effect explained the \
-             gap under Gaussian noise",
-            level.channel, tails.kurtosis, level.std
-        ));
         changed = true;
     }
     changed.then(|| {
-        heavy.refit_nominal();
-        (heavy, levels)
+        shaped.refit_nominal();
+        (shaped, levels)
     })
 }
 

@@ -13,7 +13,9 @@
 use crate::gap::estimate::{ChannelSensor, Estimates, Sensors};
 use crate::gap::plant::{EffectSpec, GapPlant, Params, PlantData, Scale, Side, Simulation};
 use crate::gap::start::{StartSensitivity, refit_start, start_sensitivities};
-use crate::gap::stats::{chi2_sf, gaussian_equivalent_samples, holm, ljung_box, variance_ratio_p};
+use crate::gap::stats::{
+    ar1_equivalent_samples, chi2_sf, gaussian_equivalent_samples, holm, ljung_box, variance_ratio_p,
+};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
 use serde::Serialize;
@@ -610,6 +612,9 @@ pub struct Problem<'a> {
     /// Kurtosis of each channel's noise: 3 (Gaussian) unless the diagnosis found its tails
     /// heavier ([`crate::gap::stats::heavy_tailed_noise`]).
     pub noise_kurtosis: Vec<f64>,
+    /// AR(1) coefficient of each channel's noise: 0 (white) unless the diagnosis found its
+    /// samples correlated ([`crate::gap::stats::ar1_from_differences`]).
+    pub noise_ar1: Vec<f64>,
     /// Training samples.
     pub train: Vec<bool>,
     /// Held-out samples.
@@ -1207,11 +1212,19 @@ impl<'a> Problem<'a> {
         holm(&p).into_iter().fold(1.0, f64::min)
     }
 
-    /// How many Gaussian samples a mean of `n` squared standardised residuals of channel `c`
-    /// is worth (`n` unless its noise is heavy-tailed; see
-    /// [`crate::gap::stats::gaussian_equivalent_samples`]).
+    /// How many independent Gaussian samples a mean of `n` consecutive squared standardised
+    /// residuals of channel `c` is worth (`n` unless its noise is heavy-tailed or
+    /// correlated; see [`crate::gap::stats::gaussian_equivalent_samples`] and
+    /// [`crate::gap::stats::ar1_equivalent_samples`]).
     pub fn gaussian_samples(&self, c: usize, n: usize) -> f64 {
-        gaussian_equivalent_samples(n as f64, self.noise_kurtosis.get(c).copied().unwrap_or(3.0))
+        let kurtosis = self.noise_kurtosis.get(c).copied().unwrap_or(3.0);
+        let phi = self.noise_ar1.get(c).copied().unwrap_or(0.0);
+        let independent = gaussian_equivalent_samples(n as f64, kurtosis);
+        if phi == 0.0 {
+            independent
+        } else {
+            ar1_equivalent_samples(independent, phi)
+        }
     }
 
     /// The smallest held-out gap that noise cannot produce: three standard deviations of
