@@ -288,7 +288,7 @@ pub const MAX_KURTOSIS: f64 = 30.0;
 ///
 /// For white noise of variance `s^2` and kurtosis `k`, the lag product
 /// `P_k = -(r_k - r_{k-1}) (r_{k+1} - r_k)` has mean `s^2` and mean square `(k + 3) s^4`,
-/// so `mean P^2 / (mean P)^2 - 3` estimates `k`. What is left of a slow signal adds its
+/// so `mean P^2 / (mean P)^2 - 3` estimates `k`. What is left of a slow signal takes off its
 /// slope's square, and a jump `J` adds `J` times the noise, not `J^4` as it would to a
 /// kurtosis of the differences; an isolated wild reading `A` adds `A^4`. On Gaussian noise
 /// the estimate spreads `16.5 / sqrt(n)` (simulated, 300 to 10 000 samples, skewed to the
