@@ -1370,9 +1370,16 @@ fn an_effect_in_a_record_of_another_timing_is_diagnosed_under_both() {
     assert_eq!(timing["timing"], "at", "{timing:#}");
     let left = timing["gap_left"].as_array().unwrap();
     assert_eq!((&left[0][0], &left[1][0]), (&"before".into(), &"at".into()));
+    // Under `before` no effect explains the gap with white Gaussian noise, and the repeat
+    // with the noise reshaped by that misfit (session 30) leaves 0.077 of a gap against the
+    // inflated noise, less than `at`'s 0.146: a reshaped diagnosis loses the contest to
+    // one with white Gaussian noise (`settle_contest`), which picked `before` without
+    // that rule. `at` left under half of `before`'s gap before the repeat existed.
+    assert!(left[1][1].as_f64().unwrap() < 0.2, "{timing:#}");
+    let sources = v["noise"].to_string();
     assert!(
-        left[1][1].as_f64().unwrap() < 0.5 * left[0][1].as_f64().unwrap(),
-        "{timing:#}"
+        !sources.contains("correlated") && !sources.contains("heavy"),
+        "{sources}"
     );
 }
 

@@ -548,25 +548,6 @@ fn diagnose_timed(
             }
         }
     }
-    if verdict == "unknown" {
-        // Every test assumes white Gaussian noise: heavy tails (a sensor's occasional wild
-        // reading) or noise correlated from sample to sample (a filtered sensor) make noise
-        // look like a gap that no effect explains. Asked only here, so that a gap that an
-        // effect explains is never weighed against a noise shaped by it (an effect's
-        // isolated spikes look like wild readings too).
-        let mut notes = Vec::new();
-        if let Some((shaped, shaped_noise)) =
-            with_noise_of_its_own_shape(&problem, &noise, &mut notes)
-        {
-            let shaped_report = analyse(&shaped);
-            let (v, r, p) = decide(&shaped, &shaped_report);
-            if v != "unknown" {
-                (problem, noise, report) = (shaped, shaped_noise, shaped_report);
-                (verdict, ranking, pairs) = (v, r, p);
-                warnings.extend(notes);
-            }
-        }
-    }
     let mut held_out_blocks = "odd";
     if verdict == "unknown" {
         // A gap confined to the held-out blocks (a clip of the record's one peak) leaves
@@ -596,6 +577,25 @@ fn diagnose_timed(
             (verdict, ranking, pairs) = (v, r, p);
             problem = swapped;
             held_out_blocks = "even (from 2)";
+        }
+    }
+    if verdict == "unknown" {
+        // Every test assumes white Gaussian noise: heavy tails (a sensor's occasional wild
+        // reading) or noise correlated from sample to sample (a filtered sensor) make noise
+        // look like a gap that no effect explains. Asked only here, so that a gap that an
+        // effect explains is never weighed against a noise shaped by it (an effect's
+        // isolated spikes look like wild readings too).
+        let mut notes = Vec::new();
+        if let Some((shaped, shaped_noise)) =
+            with_noise_of_its_own_shape(&problem, &noise, &mut notes)
+        {
+            let shaped_report = analyse(&shaped);
+            let (v, r, p) = decide(&shaped, &shaped_report);
+            if v != "unknown" {
+                (problem, noise, report) = (shaped, shaped_noise, shaped_report);
+                (verdict, ranking, pairs) = (v, r, p);
+                warnings.extend(notes);
+            }
         }
     }
     let user_estimates = problem.run_estimator(&[]);
@@ -663,8 +663,20 @@ fn settle_contest(
     // Should the other reading fail, the first stands.
     let other = diagnose_timed(plant, csv_path, recording, meta, Some(contested)).ok();
     let left_other = other.as_ref().map_or(f64::INFINITY, gap_left);
+    // A diagnosis that had to reshape the noise measured its gaps against a noise the
+    // misfit of a wrong timing may have inflated: one with white Gaussian noise wins.
+    let reshaped = |d: &Diagnosis| {
+        d.noise
+            .iter()
+            .any(|n| matches!(n.source, "correlated residual" | "heavy-tailed residual"))
+    };
     let mut chosen = match other {
-        Some(other) if left_other < 0.9 * left_first => other,
+        Some(other)
+            if (reshaped(&first) && !reshaped(&other))
+                || (reshaped(&first) == reshaped(&other) && left_other < 0.9 * left_first) =>
+        {
+            other
+        }
         _ => first,
     };
     chosen.input_timing = TimingChoice {
